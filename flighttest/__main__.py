@@ -1,0 +1,5 @@
+import sys
+
+from flighttest.cli import main
+
+sys.exit(main())

@@ -1,0 +1,59 @@
+"""The ``flighttest`` command: one sub-command module per capability, each with ``register()``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from flighttest import __version__
+from flighttest.errors import FlighttestError
+
+DESCRIPTION = """\
+flighttest: fast-descent flight tests that avoid the vortex ring state (VRS) and the windmill-brake
+state (WBS) on quadcopters (Talaeizadeh et al.). Plan minimum-time descents, fly them in PX4 offboard
+with a live blade-frame VRS guard, probe the VRS onset with a sine sweep, and analyse the logs.
+"""
+
+EPILOG = """\
+start here:
+  flighttest demo                         the whole job end to end against the built-in fake vehicle
+  flighttest vehicle list                 shipped and user vehicle profiles
+  flighttest region chart --vehicle x500 -o chart.png
+every command that reports numbers takes --json; bad input exits with code 2 and one error line.
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from flighttest.cli import analysis, demo, fly, plan, region, sim, vehicle
+
+    parser = argparse.ArgumentParser(
+        prog="flighttest",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"flighttest {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module in (demo, vehicle, region, plan, sim, fly, analysis):
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except FlighttestError as exc:
+        print(f"flighttest: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("flighttest: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
