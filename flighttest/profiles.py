@@ -47,7 +47,6 @@ class VrsBoundary:
 @dataclass(frozen=True)
 class VehicleProfile:
     name: str
-    description: str
     mass_kg: float
     n_rotors: int
     rotor_diameter_m: float
@@ -56,6 +55,7 @@ class VehicleProfile:
     max_thrust_per_rotor_n: float
     max_rate_dps: tuple[float, float, float]
     max_tilt_deg: float
+    description: str = ""
     air_density_kgpm3: float = 1.225
     min_thrust_per_rotor_n: float = 0.0
     max_speed_mps: float = 12.0
@@ -198,7 +198,7 @@ def _check_value(path, key: str, value: Any, kind) -> Any:
         return value
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise _bad(path, key, f"must be a finite number (got {value!r})")
-    base = key.split("[")[0]
+    base = key.split("[")[0].split(".")[-1]
     if base in _NON_NEGATIVE:
         if value < 0:
             raise _bad(path, key, f"must be ≥ 0 (got {value!r})")
@@ -228,7 +228,7 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
     for key, value in vrs_raw.items():
         if key not in _VRS_FIELDS:
             raise _bad(path, f"vrs.{key}", "is not a known field")
-        vrs_kwargs[key] = _check_value(path, key, value, _VRS_FIELDS[key])
+        vrs_kwargs[key] = _check_value(path, f"vrs.{key}", value, _VRS_FIELDS[key])
     vrs = VrsBoundary(**vrs_kwargs)
     if not 0 < vrs.cone_deg < 90:
         raise _bad(path, "vrs.cone_deg", f"must lie in (0, 90) degrees (got {vrs.cone_deg})")
@@ -238,7 +238,8 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
         raise _bad(path, "max_tilt_deg", f"must lie in (0, 90) degrees (got {kwargs['max_tilt_deg']})")
     prof = VehicleProfile(**kwargs, vrs=vrs, path=str(path))
     if prof.thrust_to_weight <= 1.0:
-        raise _bad(path, "max_thrust_per_rotor_n", f"cannot lift the vehicle (thrust/weight {prof.thrust_to_weight:.2f})")
+        twr = prof.thrust_to_weight
+        raise _bad(path, "max_thrust_per_rotor_n", f"cannot lift the vehicle (thrust/weight {twr:.2f})")
     if prof.min_thrust_per_rotor_n >= prof.hover_thrust_per_rotor_n:
         raise _bad(path, "min_thrust_per_rotor_n", "must be below the hover thrust per rotor")
     return prof

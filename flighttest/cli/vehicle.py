@@ -1,0 +1,60 @@
+"""``flighttest vehicle list|show``: the vehicle profiles and their VRS numbers."""
+
+from __future__ import annotations
+
+import argparse
+
+from rich.table import Table
+
+from flighttest.console import console, print_json
+from flighttest.profiles import list_profiles, load_profile
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("vehicle", help="list and show vehicle profiles (v_h, w_allow, cone)")
+    vsub = p.add_subparsers(dest="vehicle_command", metavar="ACTION", required=True)
+    pl = vsub.add_parser("list", help="all shipped and user profiles")
+    pl.add_argument("--json", action="store_true", help="machine-readable output")
+    pl.set_defaults(func=cmd_list)
+    ps = vsub.add_parser("show", help="one profile in full")
+    ps.add_argument("name", help="profile name or path to a .toml file")
+    ps.add_argument("--json", action="store_true", help="machine-readable output")
+    ps.set_defaults(func=cmd_show)
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    profiles = list_profiles()
+    if args.json:
+        print_json([p.summary() for p in profiles])
+        return 0
+    t = Table(title="Vehicle profiles")
+    for col in ("name", "mass kg", "rotor Ø m", "v_h m/s", "w_allow m/s", "w_allow/v_h", "cone °"):
+        t.add_column(col, justify="left" if col == "name" else "right", no_wrap=True)
+    for p in profiles:
+        s = p.summary()
+        t.add_row(
+            p.name,
+            f"{p.mass_kg:g}",
+            f"{p.rotor_diameter_m:g}",
+            f"{s['v_h_mps']:.2f}",
+            f"{s['w_allow_mps']:.3f}",
+            f"{s['w_allow_n']:.3f}",
+            f"{p.vrs.cone_deg:g}",
+        )
+    console.print(t)
+    return 0
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    p = load_profile(args.name)
+    s = p.summary()
+    if args.json:
+        print_json(s)
+        return 0
+    t = Table(title=f"Vehicle '{p.name}'", show_header=False)
+    t.add_column("field")
+    t.add_column("value")
+    for key, value in s.items():
+        t.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
+    console.print(t)
+    return 0
