@@ -1,9 +1,178 @@
-"""`flighttest fly` commands (placeholder until its capability lands)."""
+"""``flighttest fly probe|helix|vertical|TRAJECTORY_FILE --connect URL --vehicle NAME``.
+
+The three named missions are the scripts in ``missions/`` (each with its TOML config beside it);
+a trajectory file is flown as planned. Prints the preflight table, asks go/no-go (``--yes`` skips
+it; without a terminal and without ``--yes`` it refuses to arm), flies with the live guard, and
+prints the flight's log folder at the end (``--json``: the summary).
+"""
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import importlib.util
+import math
+import sys
+from pathlib import Path
+from types import ModuleType
+
+from flighttest.console import console, err_console, print_json
+from flighttest.errors import FlighttestError
+
+MISSIONS = {"probe": "vrs_probe", "helix": "helix_descent", "vertical": "vertical_descent"}
+MISSIONS_DIR = Path(__file__).resolve().parents[2] / "missions"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    return None
+    p = sub.add_parser("fly", help="fly a mission or trajectory file in offboard with the live VRS guard",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    add_fly_arguments(p)
+    p.set_defaults(func=cmd_fly)
+
+
+def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
+    if target:
+        p.add_argument("target", metavar="probe|helix|vertical|TRAJECTORY_FILE",
+                       help="a named mission (missions/*.py) or a trajectory file (NAME.csv + NAME.json)")  # fmt: skip
+    p.add_argument("--connect", required=True, metavar="URL",
+                   help="vehicle link: udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT, serial://DEV:BAUD")
+    p.add_argument("--vehicle", required=True, metavar="NAME", help="vehicle profile name or .toml path")
+    p.add_argument("--config", type=Path, metavar="TOML", help="mission config (default: the mission's own TOML)")
+    p.add_argument("--height", type=float, metavar="H", help="start height above home in m (overrides the config)")
+    p.add_argument("--min-alt", type=float, metavar="M", help="altitude floor in m (overrides the config)")
+    p.add_argument("--geofence-radius", type=float, metavar="R", help="horizontal room around the start in m")
+    p.add_argument("--wind-ned", type=float, nargs=3, metavar=("N", "E", "D"),
+                   help="wind in m/s NED for the guard when the vehicle reports none (default 0 0 0)")
+    p.add_argument("--sysid", type=int, metavar="N", help="system id of the autopilot to fly when several answer")
+    p.add_argument("--yes", action="store_true", help="skip the go/no-go prompt")
+    p.add_argument("--dry-run", action="store_true", help="connect, plan and check; do not arm")
+    p.add_argument("--no-land", action="store_true", help="end in Hold at the end point instead of landing")
+    p.add_argument("--log-dir", type=Path, metavar="DIR", help="root folder of flight logs (default logs/)")
+    p.add_argument("--json", action="store_true", help="print the flight summary as JSON")
+
+
+def load_mission_module(name: str) -> ModuleType:
+    path = MISSIONS_DIR / f"{MISSIONS[name]}.py"
+    if not path.is_file():
+        raise FlighttestError(f"mission script not found: {path}")
+    spec = importlib.util.spec_from_file_location(f"flighttest_mission_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _finite(name: str, v: float | None, positive: bool = True) -> None:
+    if v is not None and not (math.isfinite(v) and (v > 0 if positive else v >= 0)):
+        raise FlighttestError(f"{name} must be a {'positive' if positive else 'non-negative'} number (got {v})")
+
+
+def build_request(args: argparse.Namespace, mission: str | None = None, module: ModuleType | None = None):
+    """Profile, config (file + command-line overrides), trajectory → ``FlyRequest``."""
+    from flighttest.link import check_url
+    from flighttest.mission import FlyRequest
+    from flighttest.missions_config import MissionConfig, load_mission_config
+    from flighttest.profiles import load_profile
+    from flighttest.trajectory import Trajectory
+
+    check_url(args.connect)
+    _finite("--height", args.height)
+    _finite("--min-alt", args.min_alt, positive=False)
+    _finite("--geofence-radius", args.geofence_radius)
+    if args.wind_ned is not None and not all(math.isfinite(w) for w in args.wind_ned):
+        raise FlighttestError("--wind-ned must be three finite numbers")
+    if args.sysid is not None and not 1 <= args.sysid <= 255:
+        raise FlighttestError(f"--sysid must be 1..255 (got {args.sysid})")
+    profile = load_profile(args.vehicle)
+    target = mission or args.target
+    if module is None and target in MISSIONS:
+        module = load_mission_module(target)
+    if module is not None:
+        cfg = load_mission_config(args.config or module.CONFIG)
+    elif args.config is not None:
+        cfg = load_mission_config(args.config)
+    else:
+        cfg = MissionConfig("file")
+    overrides = {}
+    if args.height is not None:
+        overrides["start_height_m"] = args.height
+    if args.min_alt is not None:
+        overrides["min_alt_m"] = args.min_alt
+    if args.geofence_radius is not None:
+        overrides["geofence_radius_m"] = args.geofence_radius
+    if args.no_land:
+        overrides["land"] = False
+    if overrides:
+        cfg = cfg.with_flight(**overrides)
+    if cfg.flight.start_height_m <= cfg.flight.min_alt_m:
+        raise FlighttestError(
+            f"start height {cfg.flight.start_height_m:g} m must exceed the altitude floor {cfg.flight.min_alt_m:g} m"
+        )
+    if module is not None:
+        traj = module.plan(profile, cfg)
+        name, traj_path = cfg.mission, ""
+    else:
+        traj = Trajectory.load(args.target, profile)
+        name, traj_path = Path(args.target).stem, str(args.target)
+    return FlyRequest(
+        connect=args.connect, profile=profile, config=cfg, trajectory=traj, mission_name=name,
+        trajectory_path=traj_path, sysid=args.sysid, yes=args.yes, dry_run=args.dry_run,
+        wind_ned_mps=tuple(args.wind_ned) if args.wind_ned else None,
+        log_root=args.log_dir or _default_root(), show_panel=console.is_terminal and not args.json,
+        confirm=_confirm, print_fn=(err_console.print if args.json else console.print),
+    )  # fmt: skip
+
+
+def _default_root() -> Path:
+    from flighttest.flightlog import default_log_root
+
+    return default_log_root()
+
+
+def _confirm(pre) -> bool:
+    from rich.prompt import Confirm
+
+    warn = [c for c in pre.checks if c.status == "warn"]
+    if warn:
+        console.print(f"[yellow]{len(warn)} warning(s): {', '.join(c.name for c in warn)}[/]")
+    return Confirm.ask("[bold]GO: arm and fly?[/]", default=False)
+
+
+def run_request(req, as_json: bool) -> int:
+    from flighttest.mission import fly
+
+    out = asyncio.run(fly(req))
+    summary = out.summary()
+    if as_json:
+        print_json(summary)
+    else:
+        colour = {"completed": "green", "dry_run": "green", "probe_stopped": "yellow"}.get(out.outcome, "red")
+        line = f"[{colour}]{out.outcome}[/]"
+        if out.abort_reason:
+            line += f": {out.abort_reason}"
+        if out.descent_time_s is not None:
+            line += f"  (descent {out.descent_time_s:.2f} s)"
+        console.print(line)
+        console.print(f"log: {out.log_dir}")
+    if out.outcome == "refused":
+        raise FlighttestError(out.abort_reason or "refused")
+    if out.exit_code and not as_json:
+        print(f"flighttest: aborted: {out.abort_reason}", file=sys.stderr)
+    return out.exit_code
+
+
+def cmd_fly(args: argparse.Namespace) -> int:
+    return run_request(build_request(args), args.json)
+
+
+def mission_main(mission: str, module: ModuleType, argv: list[str] | None = None) -> int:
+    """Entry point of the scripts in ``missions/``: same options as ``flighttest fly``."""
+    p = argparse.ArgumentParser(prog=f"missions/{MISSIONS[mission]}.py", description=module.__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    add_fly_arguments(p, target=False)
+    args = p.parse_args(argv)
+    args.target = mission
+    try:
+        return run_request(build_request(args, mission, module), args.json)
+    except FlighttestError as exc:
+        print(f"flighttest: error: {exc}", file=sys.stderr)
+        return exc.exit_code

@@ -1,9 +1,446 @@
-"""`flighttest plan` commands (placeholder until its capability lands)."""
+"""``flighttest plan planar|helix|vertical|probe``: plan a descent and write a trajectory file.
+
+Every command writes ``PATH.csv`` + ``PATH.json`` (``flighttest.trajectory``), prints a rich
+summary (or ``--json``), and can draw a PNG (``--plot``). A solve that does not converge is
+reported with its status and best point, writes nothing, and exits with code 1.
+"""
 
 from __future__ import annotations
 
 import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+from rich.table import Table
+
+from flighttest.console import console, err_console, print_json
+from flighttest.errors import FlighttestError
+from flighttest.profiles import VehicleProfile, load_profile
+
+SOLVER_FAILED = 1
+# Share of the vehicle's vertical acceleration the probe reference may ask for (the rest: control).
+PROBE_ACCEL_FRACTION = 0.8
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    return None
+    p = sub.add_parser("plan", help="minimum-time descents (planar, 3D helix), vertical baseline, probe")
+    psub = p.add_subparsers(dest="plan_command", metavar="KIND", required=True)
+
+    pp = psub.add_parser(
+        "planar",
+        help="planar minimum-time descent (paper Table II cases or your bounds)",
+        description="Paper's planar model (Y, V_Y, Z, V_Z, φ; f_coll, ω). --case N reproduces Table II with "
+        "its bounds (thrust may go negative there); otherwise bounds come from --vehicle (thrust ≥ 0) "
+        "and the options below.",
+    )
+    pp.add_argument("--case", type=int, choices=range(1, 7), metavar="N", help="Table II case 1-6")
+    pp.add_argument("--height", type=float, default=5.0, metavar="M", help="descent height (default 5)")
+    pp.add_argument("--y-bound", type=float, metavar="M", help="|Y| bound, m (default 15 or the case's)")
+    pp.add_argument("--y-final", choices=("fixed", "free"), help="final Y fixed at 0 or free within the bound")
+    pp.add_argument("--phi-bound", metavar="DEG", help="roll bound in degrees, or 'free' (flips)")
+    pp.add_argument("--omega-max", type=float, metavar="RPS", help="roll-rate bound, rad/s")
+    pp.add_argument("--f-min", type=float, metavar="MPS2", help="min collective thrust per mass, m/s²")
+    pp.add_argument("--f-max", type=float, metavar="MPS2", help="max collective thrust per mass, m/s²")
+    pp.add_argument("--v-bound", type=float, metavar="MPS", help="speed bound per axis, m/s")
+    pp.add_argument("--wind", nargs=2, type=float, metavar=("WE", "WD"), help="wind east/down, m/s")
+    pp.add_argument("--intervals", type=int, default=80, metavar="N", help="mesh intervals (default 80)")
+    _common(pp, kind="planar", constraint=True)
+    pp.set_defaults(func=cmd_planar)
+
+    ph = psub.add_parser(
+        "helix",
+        help="3D minimum-time descent (quaternions, thrust + body rates): a helix within a radius",
+        description="Rigid body with quaternions; inputs collective thrust and body rates; bounds on radius, "
+        "tilt, rates, angular acceleration, thrust (≥ 0) from the vehicle profile.",
+    )
+    ph.add_argument("--height", type=float, default=5.0, metavar="M", help="descent height (default 5)")
+    ph.add_argument("--radius", type=float, default=2.0, metavar="M", help="horizontal radius bound (default 2)")
+    ph.add_argument("--end", nargs=2, type=float, metavar=("N", "E"), help="end point (m), default the start XY")
+    ph.add_argument("--tilt-max", type=float, metavar="DEG", help="tilt bound (default the profile's)")
+    ph.add_argument("--rate-max", type=float, metavar="DPS", help="body-rate bound (default the profile's)")
+    ph.add_argument("--thrust-fraction", type=float, default=0.9, help="share of max thrust to plan with (0.9)")
+    ph.add_argument("--wind", nargs=3, type=float, metavar=("WN", "WE", "WD"), help="wind NED, m/s")
+    ph.add_argument("--intervals", type=int, default=60, metavar="N", help="mesh intervals (default 60)")
+    _common(ph, kind="helix", constraint=True)
+    ph.set_defaults(func=cmd_helix)
+
+    pv = psub.add_parser("vertical", help="fastest straight-down descent keeping w ≤ w_allow (closed form)")
+    pv.add_argument("--height", type=float, default=5.0, metavar="M", help="descent height (default 5)")
+    pv.add_argument("--w-allow", type=float, metavar="MPS", help="override the profile's w_allow")
+    pv.add_argument("--margin", type=float, metavar="MPS", help="override the profile's guard margin")
+    pv.add_argument("--accel-fraction", type=float, default=0.8, help="share of the accel limits (0.8)")
+    _common(pv, kind="vertical", constraint=False)
+    pv.set_defaults(func=cmd_vertical)
+
+    pr = psub.add_parser(
+        "probe",
+        help="VRS-onset probe: one-sided chirp d = A/2·(1 − cos(ω0 t²)) with ramp-in",
+        description="Descent speed grows slowly; ends at the last whole cycle under the speed cap and duration; "
+        "the amplitude must fit above the altitude floor. Output lists when each descent speed is first reached.",
+    )
+    pr.add_argument("--amplitude", type=float, default=2.0, metavar="M", help="max depth below start (2)")
+    pr.add_argument("--omega0", type=float, default=0.05, metavar="RPS2", help="chirp rate ω0, rad/s² (0.05)")
+    pr.add_argument("--ramp", type=float, default=3.0, metavar="S", help="ramp-in time (3)")
+    pr.add_argument("--max-descent-speed", type=float, default=3.0, metavar="MPS", help="speed cap (3)")
+    pr.add_argument("--duration", type=float, default=60.0, metavar="S", help="longest duration (60)")
+    pr.add_argument("--start-alt", type=float, default=10.0, metavar="M", help="start altitude AGL (10)")
+    pr.add_argument("--floor", type=float, default=2.0, metavar="M", help="altitude floor AGL (2)")
+    pr.add_argument("--speed-step", type=float, default=0.1, metavar="MPS", help="speed grid step (0.1)")
+    _common(pr, kind="probe", constraint=False)
+    pr.set_defaults(func=cmd_probe)
+
+
+def _common(p: argparse.ArgumentParser, kind: str, constraint: bool) -> None:
+    p.add_argument("--vehicle", default="x500", help="vehicle profile name or .toml path (default x500)")
+    if constraint:
+        p.add_argument("--constraint", choices=("cone", "guard"),
+                       help="pure cone (w_allow = 0, the paper's) or the guard region (profile's w_allow); "
+                            "default cone")  # fmt: skip
+        p.add_argument("--margin", type=float, metavar="MPS",
+                       help="margin kept from the boundary (default: the profile's guard margin for vehicle "
+                            "plans, 0 for Table II cases)")  # fmt: skip
+    p.add_argument("-o", "--output", type=Path, metavar="PATH", help=f"output stem (default trajectories/{kind}-...)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--plot", type=Path, metavar="PNG", help="write a PNG of path, speeds, attitude and the cone")
+    p.add_argument("--verbose", action="store_true", help="show IPOPT's output")
+
+
+# -- helpers -----------------------------------------------------------------------------------------
+
+
+def _finite(name: str, value: float | None, positive: bool = False, non_negative: bool = False) -> None:
+    if value is None:
+        return
+    if not math.isfinite(value) or (positive and value <= 0) or (non_negative and value < 0):
+        need = "a positive number" if positive else "a number ≥ 0" if non_negative else "a finite number"
+        raise FlighttestError(f"--{name} must be {need} (got {value})")
+
+
+def _constraint(args: argparse.Namespace, profile: VehicleProfile, paper: bool):
+    from flighttest.planner.cone import VelocityConstraint
+
+    _finite("margin", args.margin, non_negative=True)
+    kind = args.constraint or "cone"
+    margin = args.margin if args.margin is not None else (0.0 if paper else profile.vrs.margin_mps)
+    w_allow = profile.w_allow_mps if kind == "guard" else 0.0
+    return VelocityConstraint(cone_deg=profile.vrs.cone_deg, w_allow_mps=w_allow, margin_mps=margin)
+
+
+def _out_path(args: argparse.Namespace, default: str) -> Path:
+    return args.output if args.output is not None else Path("trajectories") / default
+
+
+def _save(traj, args, out: Path) -> Path:
+    try:
+        csv_path, _ = traj.save(out)
+    except OSError as exc:
+        raise FlighttestError(f"cannot write trajectory {out}: {exc.strerror}") from None
+    return csv_path
+
+
+def _report(args: argparse.Namespace, title: str, data: dict[str, Any], rows: list[tuple[str, str]]) -> None:
+    if args.json:
+        print_json(data)
+        return
+    table = Table(title=title, show_header=False)
+    table.add_column("", style="bold")
+    table.add_column("")
+    for k, v in rows:
+        table.add_row(k, v)
+    console.print(table)
+
+
+def _failed(args: argparse.Namespace, kind: str, sol) -> int:
+    r = sol.result
+    data = {
+        "status": r.status,
+        "t_f_s": r.t_f_s,
+        "solve_s": sol.solve_s,
+        "path": None,
+        "best_point": {"t_f_s": r.t_f_s, "max_defect": r.max_defect, "iterations": r.iterations, "guess": r.guess},
+        "attempts": sol.attempts,
+    }
+    if args.json:
+        print_json(data)
+    else:
+        err_console.print(
+            f"[red]{kind}: the solver did not converge[/red] (status {r.status}); best point: t_f = {r.t_f_s:.3f} s, "
+            f"max dynamics defect {r.max_defect:.2e}, after {r.iterations} iterations from guess '{r.guess}'. "
+            "Nothing written."
+        )
+    return SOLVER_FAILED
+
+
+def _plot(args, traj, constraint, wind=(0.0, 0.0, 0.0)) -> str | None:
+    if args.plot is None:
+        return None
+    from flighttest.planner.plot import plot_trajectory
+
+    return str(plot_trajectory(traj, args.plot, constraint, wind))
+
+
+# -- commands ----------------------------------------------------------------------------------------
+
+
+def cmd_planar(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from flighttest.planner.cases import table_case
+    from flighttest.planner.export import planar_trajectory
+    from flighttest.planner.planar import PlanarProblem, solve_planar
+
+    profile = load_profile(args.vehicle)
+    for name in ("height", "y_bound", "omega_max", "v_bound"):
+        _finite(name.replace("_", "-"), getattr(args, name), positive=True)
+    for name in ("f_min", "f_max"):
+        _finite(name.replace("_", "-"), getattr(args, name))
+    if args.intervals < 10:
+        raise FlighttestError("--intervals must be at least 10")
+    phi_bound: float | str | None = "unset"
+    if args.phi_bound is not None:
+        if args.phi_bound.lower() == "free":
+            phi_bound = None
+        else:
+            try:
+                deg = float(args.phi_bound)
+            except ValueError:
+                raise FlighttestError(f"--phi-bound must be degrees or 'free' (got {args.phi_bound!r})") from None
+            _finite("phi-bound", deg, positive=True)
+            phi_bound = math.radians(deg)
+    paper = args.case is not None
+    constraint = _constraint(args, profile, paper)
+    if paper:
+        case = table_case(args.case)
+        p = case.problem
+        default_name = f"planar-case{args.case}"
+    else:
+        case = None
+        n = profile.n_rotors
+        p = PlanarProblem(
+            f_min_mps2=n * profile.min_thrust_per_rotor_n / profile.mass_kg,
+            f_max_mps2=0.9 * n * profile.max_thrust_per_rotor_n / profile.mass_kg,
+            phi_bound_rad=math.radians(profile.max_tilt_deg),
+            omega_max_rps=math.radians(profile.max_rate_dps[0]),
+            v_bound_mps=profile.max_speed_mps,
+        )
+        default_name = f"planar-{profile.name}-{args.height:g}m"
+    overrides: dict[str, Any] = {"constraint": constraint, "n_intervals": args.intervals,
+                                 "n_coarse": max(10, args.intervals // 2)}  # fmt: skip
+    for arg, field in (("height", "height_m"), ("y_bound", "y_bound_m"), ("y_final", "y_final"),
+                       ("omega_max", "omega_max_rps"), ("f_min", "f_min_mps2"), ("f_max", "f_max_mps2"),
+                       ("v_bound", "v_bound_mps")):  # fmt: skip
+        val = getattr(args, arg)
+        if val is not None and not (paper and arg == "height" and val == 5.0):
+            overrides[field] = val
+    if phi_bound != "unset":
+        overrides["phi_bound_rad"] = phi_bound
+    if args.wind:
+        _finite("wind", args.wind[0])
+        _finite("wind", args.wind[1])
+        overrides["wind_y_mps"], overrides["wind_z_mps"] = args.wind
+    p = replace(p, **overrides)
+    p = replace(p, z_bound_m=max(p.z_bound_m, p.height_m))
+    sol = solve_planar(p, verbose=args.verbose)
+    if not sol.success:
+        return _failed(args, "planar", sol)
+    extra = {}
+    if case is not None:
+        extra = {"table_case": case.number, "paper_t_f_s": case.paper_t_f_s}
+    traj = planar_trajectory(sol, profile.name, profile.mass_kg, extra)
+    if not paper:
+        traj.validate(profile, where="planned trajectory")
+    out = _save(traj, args, _out_path(args, default_name))
+    plot = _plot(args, traj, p.constraint, (0.0, p.wind_y_mps, p.wind_z_mps))
+    man = sol.manoeuvre()
+    x = sol.result.x
+    data = {
+        "status": sol.status,
+        "t_f_s": sol.t_f_s,
+        "solve_s": sol.solve_s,
+        "path": str(out),
+        "plot": plot,
+        "case": args.case,
+        "paper_t_f_s": case.paper_t_f_s if case else None,
+        "manoeuvre": man["label"],
+        "max_abs_y_m": float(abs(x[:, 0]).max()),
+        "max_abs_phi_deg": float(math.degrees(abs(x[:, 4]).max())),
+        "final_y_m": float(x[-1, 0]),
+        "min_f_coll_mps2": float(sol.result.u[:, 0].min()),
+        "worst_margin_mps": sol.check["worst_margin_mps"],
+        "check": sol.check,
+        "problem": p.summary(),
+        "attempts": sol.attempts,
+    }
+    rows = [
+        ("status", sol.status),
+        ("optimal time", f"{sol.t_f_s:.3f} s" + (f"  (paper {case.paper_t_f_s:.2f} s)" if case else "")),
+        ("solve time", f"{sol.solve_s:.2f} s ({len(sol.attempts)} solves)"),
+        ("manoeuvre", man["label"]),
+        ("max |Y| / final Y", f"{data['max_abs_y_m']:.2f} m / {data['final_y_m']:.2f} m"),
+        ("max |φ|", f"{data['max_abs_phi_deg']:.1f}°"),
+        ("min f_coll", f"{data['min_f_coll_mps2']:.2f} m/s²"),
+        ("constraint", f"{p.constraint.name}, margin {p.constraint.margin_mps:g} m/s"),
+        (
+            "worst margin (1 kHz re-sim)",
+            f"{sol.check['worst_margin_mps']:+.4f} m/s at t={sol.check['worst_margin_t_s']:.2f} s",
+        ),
+        ("trajectory", str(out)),
+    ]
+    if plot:
+        rows.append(("plot", plot))
+    title = f"planar descent (Table II case {args.case})" if paper else f"planar descent ({profile.name})"
+    _report(args, title, data, rows)
+    return 0
+
+
+def cmd_helix(args: argparse.Namespace) -> int:
+    from flighttest.planner.export import helix_trajectory
+    from flighttest.planner.helix import problem_for_vehicle, solve_helix
+
+    profile = load_profile(args.vehicle)
+    for name in ("height", "radius", "tilt_max", "rate_max", "thrust_fraction"):
+        _finite(name.replace("_", "-"), getattr(args, name), positive=True)
+    if args.intervals < 10:
+        raise FlighttestError("--intervals must be at least 10")
+    wind = tuple(args.wind) if args.wind else (0.0, 0.0, 0.0)
+    end = tuple(args.end) if args.end else (0.0, 0.0)
+    for v in (*wind, *end):
+        _finite("wind/--end", v)
+    constraint = _constraint(args, profile, paper=False)
+    p = problem_for_vehicle(
+        profile,
+        height_m=args.height,
+        radius_m=args.radius,
+        constraint=constraint,
+        thrust_fraction=args.thrust_fraction,
+        tilt_max_deg=args.tilt_max,
+        rate_max_dps=args.rate_max,
+        wind_ned_mps=wind,
+        end_ne_m=end,
+        n_intervals=args.intervals,
+        n_coarse=max(10, args.intervals // 2),
+    )
+    sol = solve_helix(p, verbose=args.verbose)
+    if not sol.success:
+        return _failed(args, "helix", sol)
+    traj = helix_trajectory(sol, profile.name, profile.mass_kg)
+    traj.validate(profile, where="planned trajectory")
+    out = _save(traj, args, _out_path(args, f"helix-{profile.name}-{args.height:g}m-r{args.radius:g}"))
+    plot = _plot(args, traj, constraint, wind)
+    c = sol.check
+    data = {
+        "status": sol.status,
+        "t_f_s": sol.t_f_s,
+        "solve_s": sol.solve_s,
+        "path": str(out),
+        "plot": plot,
+        "vehicle": profile.name,
+        "turns": c["turns"],
+        "max_radius_m": c["max_radius_m"],
+        "max_tilt_deg": c["max_tilt_deg"],
+        "worst_margin_mps": c["worst_margin_mps"],
+        "check": c,
+        "problem": p.summary(),
+        "attempts": sol.attempts,
+    }
+    rows = [
+        ("status", sol.status),
+        ("optimal time", f"{sol.t_f_s:.3f} s for {args.height:g} m"),
+        ("solve time", f"{sol.solve_s:.2f} s"),
+        ("turns", f"{c['turns']:.2f}"),
+        ("max radius", f"{c['max_radius_m']:.2f} m (bound {args.radius:g})"),
+        ("max tilt", f"{c['max_tilt_deg']:.1f}°"),
+        ("constraint", f"{constraint.name}, margin {constraint.margin_mps:g} m/s"),
+        ("worst margin (1 kHz re-sim)", f"{c['worst_margin_mps']:+.4f} m/s"),
+        ("trajectory", str(out)),
+    ]
+    if plot:
+        rows.append(("plot", plot))
+    _report(args, f"3D descent ({profile.name})", data, rows)
+    return 0
+
+
+def cmd_vertical(args: argparse.Namespace) -> int:
+    from flighttest.planner.cone import VelocityConstraint
+    from flighttest.planner.export import vertical_trajectory
+    from flighttest.planner.vertical import plan_vertical
+
+    profile = load_profile(args.vehicle)
+    _finite("height", args.height, positive=True)
+    _finite("w-allow", args.w_allow, positive=True)
+    _finite("margin", args.margin, non_negative=True)
+    _finite("accel-fraction", args.accel_fraction, positive=True)
+    plan = plan_vertical(profile, args.height, args.w_allow, args.margin, args.accel_fraction)
+    traj = vertical_trajectory(plan, profile.name, profile.mass_kg)
+    traj.validate(profile, where="planned trajectory")
+    out = _save(traj, args, _out_path(args, f"vertical-{profile.name}-{args.height:g}m"))
+    w_allow = plan.problem["w_allow_mps"]
+    plot = _plot(args, traj, VelocityConstraint(profile.vrs.cone_deg, w_allow, plan.problem["margin_mps"]))
+    data = {
+        "status": "closed_form",
+        "t_f_s": plan.t_f_s,
+        "solve_s": 0.0,
+        "path": str(out),
+        "plot": plot,
+        "cruise_mps": plan.cruise_mps,
+        "w_allow_mps": w_allow,
+        "a_down_mps2": plan.a_down_mps2,
+        "a_up_mps2": plan.a_up_mps2,
+        "problem": plan.problem,
+    }
+    rows = [
+        ("duration", f"{plan.t_f_s:.2f} s for {args.height:g} m"),
+        ("cruise", f"{plan.cruise_mps:.3f} m/s (w_allow {w_allow:.3f} m/s)"),
+        ("accel down / up", f"{plan.a_down_mps2:.2f} / {plan.a_up_mps2:.2f} m/s²"),
+        ("trajectory", str(out)),
+    ]
+    if plot:
+        rows.append(("plot", plot))
+    _report(args, f"vertical baseline ({profile.name})", data, rows)
+    return 0
+
+
+def cmd_probe(args: argparse.Namespace) -> int:
+    from flighttest.planner.cone import VelocityConstraint
+    from flighttest.planner.export import probe_trajectory
+    from flighttest.planner.probe import plan_probe
+
+    profile = load_profile(args.vehicle)
+    plan = plan_probe(args.amplitude, args.omega0, args.ramp, args.max_descent_speed, args.duration,
+                      args.start_alt, args.floor, args.speed_step,
+                      max_accel_down_mps2=PROBE_ACCEL_FRACTION * profile.max_accel_down_mps2,
+                      max_accel_up_mps2=PROBE_ACCEL_FRACTION * profile.max_accel_up_mps2)  # fmt: skip
+    traj = probe_trajectory(plan, profile.name, profile.mass_kg)
+    traj.validate(profile, where="planned trajectory")
+    out = _save(traj, args, _out_path(args, f"probe-{profile.name}"))
+    plot = _plot(args, traj, VelocityConstraint(profile.vrs.cone_deg, profile.w_allow_mps, profile.vrs.margin_mps))
+    data = {
+        "status": "closed_form",
+        "t_f_s": plan.t_f_s,
+        "solve_s": 0.0,
+        "path": str(out),
+        "plot": plot,
+        "cycles": plan.cycles,
+        "max_descent_mps": plan.max_descent_mps,
+        "w_allow_mps": profile.w_allow_mps,
+        "speed_first_reached": plan.speed_first_reached,
+        "problem": plan.problem,
+    }
+    if args.json:
+        print_json(data)
+        return 0
+    _report(args, f"probe reference ({profile.name})", data, [
+        ("duration", f"{plan.t_f_s:.2f} s, {plan.cycles} cycles"),
+        ("max descent speed", f"{plan.max_descent_mps:.2f} m/s (cap {args.max_descent_speed:g})"),
+        ("profile w_allow", f"{profile.w_allow_mps:.3f} m/s"),
+        ("trajectory", str(out)),
+        *([("plot", plot)] if plot else []),
+    ])  # fmt: skip
+    t = Table(title="descent speed first reached")
+    t.add_column("speed (m/s)", justify="right")
+    t.add_column("t (s)", justify="right")
+    for row in plan.speed_first_reached[:: max(1, len(plan.speed_first_reached) // 15)]:
+        t.add_row(f"{row['speed_mps']:.2f}", f"{row['t_s']:.2f}")
+    console.print(t)
+    return 0

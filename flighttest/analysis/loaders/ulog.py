@@ -1,0 +1,176 @@
+"""PX4 ``.ulg`` → :class:`FlightLog` via pyulog.
+
+PX4 topics used (each at its own rate, µs since boot):
+
+- ``vehicle_local_position``: ``x y z`` (m NED), ``vx vy vz`` (m/s NED) → the sample instants;
+- ``vehicle_attitude``: ``q[0..3]`` = w, x, y, z (body FRD → NED);
+- ``vehicle_angular_velocity``: ``xyz[0..2]`` rad/s FRD (else ``sensor_combined.gyro_rad``);
+- ``sensor_combined``: ``accelerometer_m_s2[0..2]`` (specific force FRD);
+- ``actuator_motors``: ``control[i]`` (0..1), else ``actuator_outputs``: ``output[i]`` (PWM µs);
+- ``vehicle_status``: ``nav_state`` (PX4 navigation state → name), ``arming_state`` (2 = armed);
+- ``wind`` / ``wind_estimate``: ``windspeed_north/east`` (m/s; vertical wind 0);
+- ``vehicle_local_position_setpoint`` / ``trajectory_setpoint``: the setpoints table.
+
+The data carry only the boot clock, so ``unix_s`` is NaN.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from flighttest.analysis.schema import (
+    FlightLog,
+    build_state,
+    continuous_quaternions,
+    fill_derived,
+    normalise_quaternions,
+    resample,
+)
+from flighttest.errors import FlighttestError
+
+MAX_GAP_S = 1.0
+ULOG_MAGIC = b"ULog\x01\x12\x35"
+# PX4 vehicle_status.nav_state
+NAV_STATE = {
+    0: "MANUAL",
+    1: "ALTCTL",
+    2: "POSCTL",
+    3: "AUTO_MISSION",
+    4: "AUTO_LOITER",
+    5: "AUTO_RTL",
+    10: "ACRO",
+    12: "DESCEND",
+    13: "TERMINATION",
+    14: "OFFBOARD",
+    15: "STAB",
+    17: "AUTO_TAKEOFF",
+    18: "AUTO_LAND",
+    19: "AUTO_FOLLOW_TARGET",
+    20: "AUTO_PRECLAND",
+    21: "ORBIT",
+}
+ARMED = 2
+
+TOPICS = [
+    "vehicle_local_position",
+    "vehicle_attitude",
+    "vehicle_angular_velocity",
+    "sensor_combined",
+    "actuator_motors",
+    "actuator_outputs",
+    "vehicle_status",
+    "wind",
+    "wind_estimate",
+    "vehicle_local_position_setpoint",
+    "trajectory_setpoint",
+]
+
+
+def _topic(ulog, name: str) -> dict[str, np.ndarray] | None:
+    for d in ulog.data_list:
+        if d.name == name and d.multi_id == 0 and len(d.data.get("timestamp", ())) > 0:
+            return d.data
+    return None
+
+
+def _cols(d: dict[str, np.ndarray], base: str, n: int) -> np.ndarray | None:
+    names = [f"{base}[{i}]" for i in range(n)]
+    if not all(k in d for k in names):
+        return None
+    return np.column_stack([d[k] for k in names]).astype(float)
+
+
+def load_ulog(path: Path) -> FlightLog:
+    from pyulog import ULog
+
+    with open(path, "rb") as fh:
+        head = fh.read(len(ULOG_MAGIC))
+    if head != ULOG_MAGIC:
+        raise FlighttestError(f"{path}: not a PX4 ULog file (bad header)")
+    try:
+        ulog = ULog(str(path), TOPICS, disable_str_exceptions=True)
+    except Exception as exc:  # pyulog raises assorted errors on damaged files
+        raise FlighttestError(f"{path}: cannot parse ULog ({type(exc).__name__}: {exc})") from None
+    notes = []
+    if ulog.file_corruption:
+        notes.append("ULog reports corruption: data after the damage may be missing")
+    lp = _topic(ulog, "vehicle_local_position")
+    if lp is None or not all(k in lp for k in ("x", "y", "z")):
+        raise FlighttestError(f"{path}: log has no position (vehicle_local_position)")
+    t = lp["timestamp"] / 1e6
+    cols: dict[str, np.ndarray] = {"n_m": lp["x"], "e_m": lp["y"], "d_m": lp["z"]}
+    if all(k in lp for k in ("vx", "vy", "vz")):
+        cols.update(vn_mps=lp["vx"], ve_mps=lp["vy"], vd_mps=lp["vz"])
+
+    if (att := _topic(ulog, "vehicle_attitude")) is not None and (q := _cols(att, "q", 4)) is not None:
+        qi = normalise_quaternions(resample(att["timestamp"] / 1e6, continuous_quaternions(q), t, MAX_GAP_S))
+        cols.update(qw=qi[:, 0], qx=qi[:, 1], qy=qi[:, 2], qz=qi[:, 3])
+    sc = _topic(ulog, "sensor_combined")
+    av = _topic(ulog, "vehicle_angular_velocity")
+    rates = (av["timestamp"], _cols(av, "xyz", 3)) if av is not None else (None, None)
+    if rates[1] is None and sc is not None:
+        rates = (sc["timestamp"], _cols(sc, "gyro_rad", 3))
+    if rates[1] is not None:
+        ri = resample(rates[0] / 1e6, rates[1], t, MAX_GAP_S)
+        cols.update(p_radps=ri[:, 0], q_radps=ri[:, 1], r_radps=ri[:, 2])
+    if sc is not None and (acc := _cols(sc, "accelerometer_m_s2", 3)) is not None:
+        ai = resample(sc["timestamp"] / 1e6, acc, t, MAX_GAP_S)
+        cols.update(ax_mps2=ai[:, 0], ay_mps2=ai[:, 1], az_mps2=ai[:, 2])
+
+    motors = None
+    if (am := _topic(ulog, "actuator_motors")) is not None:
+        m = _cols(am, "control", 4)
+        motors = (am["timestamp"], m) if m is not None else None
+    if motors is None and (ao := _topic(ulog, "actuator_outputs")) is not None:
+        n = int(np.max(ao.get("noutputs", [4]))) or 4
+        m = _cols(ao, "output", min(max(n, 1), 8))
+        if m is not None:
+            motors = (ao["timestamp"], np.where(np.abs(m) > 100, (m - 1000.0) / 1000.0, m))
+    if motors is not None:
+        used = np.flatnonzero(np.any(motors[1] != 0, axis=0))[:8]
+        mi = resample(motors[0] / 1e6, motors[1][:, used], t, MAX_GAP_S)
+        for k in range(mi.shape[1]):
+            cols[f"motor_{k}"] = mi[:, k]
+
+    if (vs := _topic(ulog, "vehicle_status")) is not None:
+        ts = vs["timestamp"] / 1e6
+        if "nav_state" in vs:
+            names = np.array([NAV_STATE.get(int(s), f"NAV_STATE({int(s)})") for s in vs["nav_state"]], dtype=object)
+            cols["mode"] = resample(ts, names, t, 1e9, hold=True)
+        if "arming_state" in vs:
+            cols["armed"] = resample(ts, (vs["arming_state"] == ARMED).astype(float), t, 1e9, hold=True)
+    wind = _topic(ulog, "wind") or _topic(ulog, "wind_estimate")
+    if wind is not None and "windspeed_north" in wind:
+        w = np.column_stack([wind["windspeed_north"], wind["windspeed_east"], np.zeros(len(wind["timestamp"]))])
+        wi = resample(wind["timestamp"] / 1e6, w, t, 5.0)
+        cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
+
+    missing: dict[str, str] = {}
+    t0 = float(np.min(t))
+    state = fill_derived(build_state(t, None, cols), missing)
+
+    setpoints = None
+    sp = _topic(ulog, "trajectory_setpoint") or _topic(ulog, "vehicle_local_position_setpoint")
+    if sp is not None:
+        spd = {"t_s": sp["timestamp"] / 1e6 - t0}
+        if _cols(sp, "position", 3) is not None:
+            p, v = _cols(sp, "position", 3), _cols(sp, "velocity", 3)
+            spd.update(n_m=p[:, 0], e_m=p[:, 1], d_m=p[:, 2])
+            if v is not None:
+                spd.update(vn_mps=v[:, 0], ve_mps=v[:, 1], vd_mps=v[:, 2])
+        else:
+            for src, dst in (
+                ("x", "n_m"),
+                ("y", "e_m"),
+                ("z", "d_m"),
+                ("vx", "vn_mps"),
+                ("vy", "ve_mps"),
+                ("vz", "vd_mps"),
+            ):
+                if src in sp:
+                    spd[dst] = sp[src]
+        setpoints = pd.DataFrame(spd)
+    return FlightLog(path=Path(path), source="ulog", state=state, setpoints=setpoints, missing=missing, notes=notes)

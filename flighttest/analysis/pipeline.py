@@ -1,0 +1,137 @@
+"""One log in, the per-descent table out: load → segment → exposure → fluctuation → context."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from flighttest.analysis.exposure import EXPOSURE_COLUMNS, descent_exposure, velocity_track
+from flighttest.analysis.fluctuation import FluctuationConfig, fluctuation
+from flighttest.analysis.loaders import load_log
+from flighttest.analysis.schema import FlightLog
+from flighttest.analysis.segment import SegmentConfig, find_descents
+from flighttest.errors import FlighttestError
+from flighttest.profiles import VehicleProfile, load_profile
+
+
+@dataclass
+class Analysis:
+    log: FlightLog
+    descents: pd.DataFrame
+    glitches: pd.DataFrame
+    track: pd.DataFrame | None
+    fluct: pd.DataFrame
+    baselines: dict[str, float]
+    profile: VehicleProfile | None
+    notes: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        """What ``--json`` prints per log."""
+        return {
+            "log": str(self.log.path),
+            "source": self.log.source,
+            "vehicle": self.profile.name if self.profile else None,
+            "duration_s": float(self.log.state["t_s"].iloc[-1]),
+            "descents": self.descents.drop(columns=["log", "source"], errors="ignore").to_dict("records"),
+            "glitches": self.glitches.to_dict("records"),
+            "missing": self.log.missing,
+            "notes": self.notes,
+        }
+
+
+def resolve_profile(log: FlightLog, vehicle: str | None) -> tuple[VehicleProfile | None, list[str]]:
+    if vehicle:
+        return load_profile(vehicle), []
+    if log.vehicle_name:
+        try:
+            return load_profile(log.vehicle_name), []
+        except FlighttestError as exc:
+            return None, [f"vehicle from the log unusable ({exc}); exposure needs --vehicle"]
+    return None, ["no vehicle profile (give --vehicle): VRS exposure not computed"]
+
+
+def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
+    """Mission, trajectory and phase of each descent (flighttest folders); what the live guard logged
+    inside it: samples it measured inside its region (``margin_mps < 0``) and the actions it took."""
+    traj = log.meta.get("trajectory_meta", {})
+    kind = traj.get("kind") if isinstance(traj, dict) else None
+    tpath = log.meta.get("trajectory")
+    if isinstance(tpath, dict):
+        kind = kind or tpath.get("kind")
+        tpath = tpath.get("path")
+    descents["mission"] = log.mission_name
+    descents["trajectory"] = kind or (Path(tpath).stem if isinstance(tpath, str) else None)
+    phases, inside_n, actions = [], [], []
+    sp, gd = log.setpoints, log.guard
+    phase_events = sorted(
+        (e["t_s"], str(e["phase"]))
+        for e in log.events
+        if e.get("event") == "phase" and isinstance(e.get("t_s"), int | float) and "phase" in e
+    )
+    for row in descents.itertuples():
+        phase = None
+        mid = 0.5 * (row.start_s + row.end_s)
+        before = [p for t, p in phase_events if t <= mid]
+        if before:
+            phase = before[-1]
+        elif sp is not None and "phase" in sp and "t_s" in sp:
+            inside = sp[(sp["t_s"] >= row.start_s) & (sp["t_s"] <= row.end_s)]
+            if len(inside):
+                phase = str(inside["phase"].mode().iloc[0])
+        phases.append(phase)
+        if gd is not None and "t_s" in gd and "margin_mps" in gd:
+            inside = gd[(gd["t_s"] >= row.start_s) & (gd["t_s"] <= row.end_s)]
+            inside_n.append(int((pd.to_numeric(inside["margin_mps"], errors="coerce") < 0).sum()))
+            acts = inside["action"].dropna().astype(str) if "action" in inside else pd.Series([], dtype=str)
+            acts = sorted(set(acts) - {"", "none", "observe"})
+            actions.append(",".join(acts) or None)
+        else:
+            inside_n.append(None)
+            actions.append(None)
+    descents["phase"] = phases
+    descents["guard_inside_samples"] = inside_n
+    descents["guard_actions"] = actions
+    return descents
+
+
+def analyse(
+    log: FlightLog,
+    vehicle: str | None = None,
+    seg: SegmentConfig | None = None,
+    fl_cfg: FluctuationConfig | None = None,
+) -> Analysis:
+    profile, notes = resolve_profile(log, vehicle)
+    descents, glitches = find_descents(log.state, seg)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows of absent streams
+        fl, baselines = fluctuation(log.state, fl_cfg)
+    track = velocity_track(log.state, profile) if profile else None
+    exp_rows = []
+    for row in descents.itertuples():
+        exp = (
+            descent_exposure(track, row.start_s, row.end_s)
+            if track is not None
+            else dict.fromkeys(EXPOSURE_COLUMNS, np.nan)
+        )
+        sel = (fl["t_s"] >= row.start_s) & (fl["t_s"] <= row.end_s)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            exp["fluct_index_max"] = float(np.nanmax(fl.loc[sel, "fluct_index"])) if sel.any() else np.nan
+            exp["rate_rms_max_radps"] = float(np.nanmax(fl.loc[sel, "rate_rms_radps"])) if sel.any() else np.nan
+        exp_rows.append(exp)
+    extra = pd.DataFrame(exp_rows, columns=[*EXPOSURE_COLUMNS, "fluct_index_max", "rate_rms_max_radps"])
+    descents = pd.concat([descents.reset_index(drop=True), extra], axis=1)
+    descents = _context(log, descents)
+    descents.insert(0, "source", log.source)
+    descents.insert(0, "log", str(log.path))
+    if len(glitches):
+        notes.append(f"{len(glitches)} estimator glitch(es) flagged (altitude jumps), not counted as descents")
+    return Analysis(log, descents, glitches, track, fl, baselines, profile, notes + log.notes)
+
+
+def analyse_path(path: Path | str, vehicle: str | None = None, seg: SegmentConfig | None = None) -> Analysis:
+    return analyse(load_log(path), vehicle, seg)

@@ -1,0 +1,242 @@
+"""The one tidy table every loader produces, whatever wrote the log.
+
+A loaded log is a :class:`FlightLog`: the vehicle **state** table (one row per sample of the
+position stream, every other stream resampled onto those instants), and, where the source has
+them, the **setpoints** and **guard** decisions (flighttest log folders, PX4 setpoint topics) and
+**events**, all on the same clock ``t_s``.
+
+State columns (``STATE_COLUMNS``), all SI, NED/FRD as in NOTES §1:
+
+=================  ===========================================================================
+``t_s``            seconds since the first state sample of the log (float64)
+``unix_s``         UNIX time of the sample, s (NaN when the source has no wall clock)
+``n_m e_m d_m``    position NED relative to the local origin, m (``d_m`` grows going down)
+``vn_mps ve_mps vd_mps``  velocity NED, m/s (``vd_mps > 0`` descending)
+``qw qx qy qz``    attitude quaternion body FRD → NED (w first)
+``p_radps q_radps r_radps``  body rates about x, y, z FRD, rad/s
+``ax_mps2 ay_mps2 az_mps2``  specific force in body FRD (accelerometer), m/s²; ≈ (0, 0, −9.81) in hover
+``ad_mps2``        kinematic acceleration along NED down, m/s² (from the IMU rotated to NED plus g
+                   when the IMU stream is at least half the position rate, else the derivative of
+                   ``vd_mps``: a 5 Hz IMU stream interpolated to 50 Hz would hide the shaking)
+``motor_0 …``      motor outputs normalised to 0..1 (PWM µs: (pwm − 1000)/1000); as many as the
+                   log shows active (usually 4)
+``mode``           flight mode name as pymavlink/PX4/ArduPilot name it (string)
+``armed``          armed flag (float 1/0, NaN unknown)
+``wn_mps we_mps wd_mps``  wind NED (velocity of the air), m/s; NaN where the log has no estimate
+``glitch``         estimator glitch flag set by :mod:`flighttest.analysis.segment` (bool)
+=================  ===========================================================================
+
+Every source's conventions are converted in its loader and documented there (ArduPilot's cm,
+centidegrees and up-positive altitudes; PX4 topic names; streams at different rates). A stream
+the source lacks leaves its columns NaN and adds a line to ``FlightLog.missing`` saying what
+cannot be computed; loaders raise ``FlighttestError`` only when there is no position at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from flighttest.errors import FlighttestError
+
+POSITION = ["n_m", "e_m", "d_m"]
+VELOCITY = ["vn_mps", "ve_mps", "vd_mps"]
+QUATERNION = ["qw", "qx", "qy", "qz"]
+RATES = ["p_radps", "q_radps", "r_radps"]
+ACCEL_BODY = ["ax_mps2", "ay_mps2", "az_mps2"]
+WIND = ["wn_mps", "we_mps", "wd_mps"]
+STATE_COLUMNS = [
+    "t_s",
+    "unix_s",
+    *POSITION,
+    *VELOCITY,
+    *QUATERNION,
+    *RATES,
+    *ACCEL_BODY,
+    "ad_mps2",
+    "mode",
+    "armed",
+    *WIND,
+]
+MAX_MOTORS = 8
+G_MPS2 = 9.80665
+
+# What each missing stream costs, for FlightLog.missing.
+CONSEQUENCE = {
+    "velocity": "velocity derived from position by differentiation",
+    "attitude": "no blade-frame velocity: VRS exposure assumes level attitude",
+    "rates": "no body-rate fluctuation",
+    "imu": "vertical acceleration from differentiated velocity",
+    "motors": "no motor-output spread (ΔT/T proxy)",
+    "mode": "flight mode and armed state unknown",
+    "wind": "wind unknown: exposure computed with zero wind",
+}
+
+
+def motor_columns(df: pd.DataFrame) -> list[str]:
+    return [c for c in df.columns if c.startswith("motor_")]
+
+
+@dataclass
+class FlightLog:
+    """A loaded log: the state table plus what the source had besides (see module docstring)."""
+
+    path: Path
+    source: str  # "flighttest-folder" | "tlog" | "dataflash" | "ulog"
+    state: pd.DataFrame
+    setpoints: pd.DataFrame | None = None
+    guard: pd.DataFrame | None = None
+    events: list[dict[str, Any]] = field(default_factory=list)
+    meta: dict[str, Any] = field(default_factory=dict)
+    missing: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return self.path.name
+
+    @property
+    def vehicle_name(self) -> str | None:
+        v = self.meta.get("vehicle")
+        if isinstance(v, dict):
+            v = v.get("name")
+        return v if isinstance(v, str) and v else None
+
+    @property
+    def mission_name(self) -> str | None:
+        m = self.meta.get("mission")
+        if isinstance(m, dict):
+            m = m.get("name") or m.get("kind")
+        m = m or self.meta.get("mission_name")
+        return m if isinstance(m, str) and m else None
+
+    @property
+    def has(self) -> dict[str, bool]:
+        s = self.state
+        return {
+            "attitude": bool(s["qw"].notna().any()),
+            "rates": bool(s["p_radps"].notna().any()),
+            "imu": bool(s["az_mps2"].notna().any()),
+            "motors": bool(motor_columns(s)),
+            "wind": bool(s["wn_mps"].notna().any()),
+            "mode": bool(s["mode"].notna().any()),
+        }
+
+
+def resample(
+    t_src: np.ndarray, values: np.ndarray, t_dst: np.ndarray, max_gap_s: float, hold: bool = False
+) -> np.ndarray:
+    """Values of a stream sampled at ``t_src`` at the instants ``t_dst``.
+
+    Linear interpolation (``hold=False``) or last value (``hold=True``, for modes and flags). Where
+    the nearest source sample is further than ``max_gap_s`` the result is NaN: a stream that
+    stopped is not extrapolated. ``values`` may be 1-D or (n, k).
+    """
+    t_src = np.asarray(t_src, float)
+    values = np.asarray(values)
+    out_shape = (len(t_dst), *values.shape[1:])
+    if len(t_src) == 0:
+        return np.full(out_shape, np.nan)
+    order = np.argsort(t_src, kind="stable")
+    t_src, values = t_src[order], values[order]
+    idx = np.searchsorted(t_src, t_dst, side="right")
+    prev = np.clip(idx - 1, 0, len(t_src) - 1)
+    nxt = np.clip(idx, 0, len(t_src) - 1)
+    gap = np.minimum(np.abs(t_dst - t_src[prev]), np.abs(t_src[nxt] - t_dst))
+    if hold:
+        out = values[prev].astype(float) if values.dtype.kind != "O" else values[prev].copy()
+        bad = (t_dst < t_src[0]) | (t_dst - t_src[prev] > max_gap_s)
+    else:
+        v = values.reshape(len(t_src), -1).astype(float)
+        out = np.column_stack([np.interp(t_dst, t_src, v[:, k]) for k in range(v.shape[1])]).reshape(out_shape)
+        bad = gap > max_gap_s
+    if out.dtype.kind == "O":
+        out[bad] = None
+    else:
+        out[bad] = np.nan
+    return out
+
+
+def continuous_quaternions(q: np.ndarray) -> np.ndarray:
+    """Flip signs so consecutive quaternions lie in the same hemisphere (safe to interpolate)."""
+    q = np.asarray(q, float).copy()
+    if len(q) < 2:
+        return q
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    flips = np.concatenate([[False], dots < 0])
+    sign = np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)
+    return q * sign[:, None]
+
+
+def normalise_quaternions(q: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return q / n
+
+
+def build_state(t_s: np.ndarray, unix_s: np.ndarray | None, columns: dict[str, Any]) -> pd.DataFrame:
+    """Assemble the state table: every schema column present (NaN when absent), sorted, deduplicated."""
+    n = len(t_s)
+    data: dict[str, Any] = {"t_s": np.asarray(t_s, float)}
+    data["unix_s"] = np.full(n, np.nan) if unix_s is None else np.asarray(unix_s, float)
+    for col in STATE_COLUMNS[2:]:
+        if col == "mode":
+            data[col] = columns.get(col, np.full(n, None, dtype=object))
+        else:
+            data[col] = np.asarray(columns.get(col, np.full(n, np.nan)), float)
+    for col, val in columns.items():
+        if col.startswith("motor_"):
+            data[col] = np.asarray(val, float)
+    df = pd.DataFrame(data)
+    df = df[np.isfinite(df["t_s"]) & np.isfinite(df[POSITION]).all(axis=1)]
+    df = df.sort_values("t_s", kind="stable").drop_duplicates("t_s", keep="last").reset_index(drop=True)
+    if len(df) < 2:
+        raise FlighttestError("no usable position samples (need at least 2)")
+    df["t_s"] = df["t_s"] - df["t_s"].iloc[0]
+    df["mode"] = df["mode"].astype("string")
+    return df
+
+
+def stream_rate_hz(t_s: np.ndarray) -> float:
+    t_s = np.asarray(t_s, float)
+    return (len(t_s) - 1) / (t_s.max() - t_s.min()) if len(t_s) > 1 and t_s.max() > t_s.min() else 0.0
+
+
+def fill_derived(df: pd.DataFrame, missing: dict[str, str], imu_fast: bool = True) -> pd.DataFrame:
+    """Fill what can be derived from other columns and record what could not (in ``missing``).
+
+    ``imu_fast``: the IMU stream is at least half the position rate (see ``ad_mps2``)."""
+    t = df["t_s"].to_numpy()
+    if df[VELOCITY].isna().all().all():
+        for p, v in zip(POSITION, VELOCITY):
+            df[v] = np.gradient(df[p].to_numpy(), t)
+        missing["velocity"] = CONSEQUENCE["velocity"]
+    if df["qw"].isna().all():
+        missing["attitude"] = CONSEQUENCE["attitude"]
+    if df["p_radps"].isna().all():
+        missing["rates"] = CONSEQUENCE["rates"]
+    if df["ad_mps2"].isna().all():
+        q = df[QUATERNION].to_numpy()
+        f = df[ACCEL_BODY].to_numpy()
+        if imu_fast and np.isfinite(f).any() and np.isfinite(q).any():
+            from flighttest.frames import body_to_ned
+
+            _, _, fd = body_to_ned(f[:, 0], f[:, 1], f[:, 2], q[:, 0], q[:, 1], q[:, 2], q[:, 3])
+            df["ad_mps2"] = fd + G_MPS2
+        if df["ad_mps2"].isna().all():
+            df["ad_mps2"] = np.gradient(df["vd_mps"].to_numpy(), t)
+            if not imu_fast:
+                missing["imu"] = "IMU stream slower than half the position rate: " + CONSEQUENCE["imu"]
+            else:
+                missing["imu"] = CONSEQUENCE["imu"]
+    if not motor_columns(df):
+        missing["motors"] = CONSEQUENCE["motors"]
+    if df["mode"].isna().all() and df["armed"].isna().all():
+        missing["mode"] = CONSEQUENCE["mode"]
+    if df["wn_mps"].isna().all():
+        missing["wind"] = CONSEQUENCE["wind"]
+    return df

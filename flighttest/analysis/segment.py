@@ -1,0 +1,188 @@
+"""Find the descents in a flight, time them, and flag estimator glitches.
+
+A **descent** is a stretch where the height falls faster than ``rate_threshold_mps`` (runs closer
+than ``merge_gap_s`` joined) by at least ``min_height_m``. Its **start height** is the median height
+over ``settle_window_s`` before the stretch, its **end height** the median over ``settle_window_s``
+starting half a window after it (the tail is still creeping at the threshold). It **starts** when
+the height first falls ``start_tol_m`` below the start height and **ends** when the height comes
+within ``end_tol_m`` of the end height and stays there for ``settle_hold_s`` (so an overshoot or a
+bounce counts as part of the descent). Crossing times are interpolated between samples. All
+thresholds live in :class:`SegmentConfig`.
+
+An **estimator glitch** is a sample whose altitude jumps away from its neighbours (more than
+``glitch_jump_m`` off the running median over ``glitch_window_s``, or moving faster than
+``glitch_speed_mps`` between samples): an altitude "jumping through the ground". Glitch samples are
+flagged (``state.glitch``), bridged by interpolation for the segmentation, and reported as glitches,
+never as descents.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from flighttest.errors import FlighttestError
+
+
+@dataclass(frozen=True)
+class SegmentConfig:
+    rate_threshold_mps: float = 0.15  # a descent falls at least this fast (smoothed)
+    min_height_m: float = 0.5  # smaller drops are station-keeping, not descents
+    merge_gap_s: float = 1.0  # pauses shorter than this do not split a descent
+    smooth_s: float = 0.2  # centred moving average on rates, against sensor noise
+    settle_window_s: float = 1.0  # start/end heights: medians over this long outside the descent
+    start_tol_m: float = 0.05  # the descent starts once this far below the start height
+    end_tol_m: float = 0.10  # ... and ends once within this of the end height
+    settle_hold_s: float = 0.5  # ... for at least this long
+    glitch_jump_m: float = 2.0  # altitude this far off its running median is a glitch
+    glitch_window_s: float = 2.0  # running-median window for the glitch test
+    glitch_speed_mps: float = 25.0  # altitude moving faster than this between samples is a glitch
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (np.isfinite(value) and value > 0):
+                raise FlighttestError(f"segmentation threshold {name} must be a finite number > 0 (got {value})")
+
+
+def _samples(t: np.ndarray, seconds: float) -> int:
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    return max(1, round(seconds / max(dt, 1e-6)))
+
+
+def flag_glitches(t: np.ndarray, d: np.ndarray, cfg: SegmentConfig) -> np.ndarray:
+    """Boolean mask of altitude samples that jump away from their neighbours."""
+    win = _samples(t, cfg.glitch_window_s) | 1
+    med = pd.Series(d).rolling(win, center=True, min_periods=1).median().to_numpy()
+    off = np.abs(d - med) > cfg.glitch_jump_m
+    speed = np.abs(np.diff(d)) / np.maximum(np.diff(t), 1e-6)
+    fast = np.zeros(len(d), dtype=bool)
+    fast[1:] |= speed > cfg.glitch_speed_mps
+    fast[:-1] |= speed > cfg.glitch_speed_mps
+    # a fast step that the running median does not see is a real step only if it persists: keep only
+    # fast samples that are also off the median, or isolated spikes (both neighbours fast)
+    return off | (fast & (np.abs(d - med) > 0.5 * cfg.glitch_jump_m))
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) indices of the True runs."""
+    if not mask.any():
+        return []
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1))
+
+
+def _crossing(t: np.ndarray, h: np.ndarray, i: int, level: float) -> float:
+    """Time where h crosses ``level`` between samples i−1 and i (linear)."""
+    if i <= 0 or h[i] == h[i - 1]:
+        return float(t[i])
+    f = (level - h[i - 1]) / (h[i] - h[i - 1])
+    return float(t[i - 1] + np.clip(f, 0.0, 1.0) * (t[i] - t[i - 1]))
+
+
+def glitch_table(t: np.ndarray, d: np.ndarray, glitch: np.ndarray) -> pd.DataFrame:
+    rows = []
+    for a, b in _runs(glitch):
+        ref = d[a - 1] if a > 0 else d[b + 1] if b + 1 < len(d) else np.nan
+        rows.append(
+            {
+                "start_s": float(t[a]),
+                "duration_s": float(t[b] - t[a]),
+                "max_jump_m": float(np.nanmax(np.abs(d[a : b + 1] - ref))),
+            }
+        )
+    return pd.DataFrame(rows, columns=["start_s", "duration_s", "max_jump_m"])
+
+
+def find_descents(state: pd.DataFrame, cfg: SegmentConfig | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(descents, glitches). Sets ``state['glitch']``. Descent columns: see module docstring and
+    ``DESCENT_COLUMNS``; times on the state clock ``t_s``."""
+    cfg = cfg or SegmentConfig()
+    t = state["t_s"].to_numpy(float)
+    d_raw = state["d_m"].to_numpy(float)
+    glitch = flag_glitches(t, d_raw, cfg)
+    state["glitch"] = glitch
+    d = d_raw.copy()
+    if glitch.any() and (~glitch).sum() >= 2:
+        d[glitch] = np.interp(t[glitch], t[~glitch], d_raw[~glitch])
+    h = -d
+    n_s = _samples(t, cfg.smooth_s)
+    rate = -np.gradient(pd.Series(h).rolling(n_s, center=True, min_periods=1).mean().to_numpy(), t)
+    vd = state["vd_mps"].to_numpy(float)
+    vd_s = pd.Series(vd).rolling(n_s, center=True, min_periods=1).mean().to_numpy()
+
+    runs = _runs(rate > cfg.rate_threshold_mps)
+    merged: list[list[int]] = []
+    for a, b in runs:
+        if merged and t[a] - t[merged[-1][1]] < cfg.merge_gap_s:
+            merged[-1][1] = b
+        else:
+            merged.append([a, b])
+
+    n_e, e = state["n_m"].to_numpy(float), state["e_m"].to_numpy(float)
+    rows = []
+    for a, b in merged:
+        before = (t >= t[a] - cfg.settle_window_s) & (t <= t[a])
+        # the end height is measured half a window later: the tail of a descent is still creeping
+        after = (t >= t[b] + 0.5 * cfg.settle_window_s) & (t <= t[b] + 1.5 * cfg.settle_window_s)
+        if not after.any():
+            after = t >= t[b]
+        h0, h1 = float(np.median(h[before])), float(np.median(h[after]))
+        if h0 - h1 < cfg.min_height_m:
+            continue
+        lo = int(np.flatnonzero(before)[0])
+        # leave from the last sample still at the start height (a vehicle still creeping up to its
+        # start height before the window's end has not started descending)
+        at_start = np.flatnonzero(h[lo : a + 1] >= h0 - cfg.start_tol_m)
+        first = lo + (int(at_start[-1]) if len(at_start) else 0)
+        below = np.flatnonzero(h[first : b + 1] < h0 - cfg.start_tol_m)
+        if len(below) == 0:
+            continue
+        i0 = first + int(below[0])
+        t0 = _crossing(t, h, i0, h0 - cfg.start_tol_m)
+        # end: first sample from which |h − h1| ≤ tol for settle_hold_s (or to the end of the log)
+        hold_n = _samples(t, cfg.settle_hold_s)
+        inside = np.abs(h[i0:] - h1) <= cfg.end_tol_m
+        stay = pd.Series(inside[::-1]).rolling(hold_n, min_periods=1).min().to_numpy()[::-1].astype(bool)
+        cand = np.flatnonzero(inside & stay)
+        i1 = i0 + int(cand[0]) if len(cand) else len(t) - 1
+        level = h1 + cfg.end_tol_m if h[i1 - 1] > h1 else h1 - cfg.end_tol_m
+        t1 = _crossing(t, h, i1, level) if len(cand) else float(t[i1])
+        span = slice(max(i0 - 1, 0), i1 + 1)
+        horiz = np.hypot(n_e[span] - n_e[i0], e[span] - e[i0])
+        rows.append(
+            {
+                "start_s": t0,
+                "end_s": t1,
+                "duration_s": t1 - t0,
+                "height_m": h0 - h1,
+                "start_alt_m": h0,
+                "end_alt_m": h1,
+                "mean_rate_mps": (h0 - h1) / max(t1 - t0, 1e-9),
+                "max_rate_mps": float(np.nanmax(vd_s[span]))
+                if np.isfinite(vd_s[span]).any()
+                else float(np.max(rate[span])),
+                "horizontal_excursion_m": float(np.nanmax(horiz)),
+                "glitch": bool(glitch[span].any()),
+                "settled": bool(len(cand)),
+            }
+        )
+    descents = pd.DataFrame(rows, columns=DESCENT_COLUMNS)
+    descents.insert(0, "descent", np.arange(1, len(descents) + 1))
+    return descents, glitch_table(t, d_raw, glitch)
+
+
+DESCENT_COLUMNS = [
+    "start_s",
+    "end_s",
+    "duration_s",
+    "height_m",
+    "start_alt_m",
+    "end_alt_m",
+    "mean_rate_mps",
+    "max_rate_mps",
+    "horizontal_excursion_m",
+    "glitch",
+    "settled",
+]

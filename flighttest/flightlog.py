@@ -1,0 +1,183 @@
+"""One folder per flight (docs/CONTRACTS.md "Flight log folders"), written as the vehicle flies.
+
+Rows go to open CSV / JSONL files and are flushed to the OS at least every ``FLUSH_EVERY_S``, so a
+process killed mid-flight (even with SIGKILL) loses at most that much: every line that reached the
+file is complete, and the analysis tools read what is there. ``summary.json`` is written last; its
+absence marks a flight that did not end cleanly.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import platform
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import IO, Any
+
+from flighttest.console import _clean
+
+FLUSH_EVERY_S = 0.5
+
+SETPOINT_COLUMNS = (
+    "t_s", "unix_s", "n_m", "e_m", "d_m", "vn_mps", "ve_mps", "vd_mps",
+    "an_mps2", "ae_mps2", "ad_mps2", "yaw_deg", "phase",
+)  # fmt: skip
+GUARD_COLUMNS = (
+    "t_s", "unix_s", "verdict", "w_mps", "u_mps", "margin_mps", "predicted_margin_mps", "action",
+    "reason", "vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "wn_mps", "we_mps", "wd_mps", "alt_m",
+)  # fmt: skip
+
+
+def default_log_root() -> Path:
+    return Path(os.environ.get("FLIGHTTEST_LOG_DIR", "logs"))
+
+
+def _fmt(v: Any) -> Any:
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else f"{v:.6g}" if abs(v) < 1e5 else f"{v:.3f}"
+    return v
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(_clean(data), indent=2) + "\n", encoding="utf-8")
+    tmp.replace(path)
+
+
+class FlightLog:
+    """The open log folder of one flight. ``t_s`` columns count from ``t0_mono`` (mission start)."""
+
+    def __init__(self, root: Path | str, mission: str, t0_mono: float | None = None) -> None:
+        root = Path(root)
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in mission) or "flight"
+        base = root / f"{stamp}-{safe}"
+        path, n = base, 1
+        while True:
+            try:
+                path.mkdir(parents=True, exist_ok=False)
+                break
+            except FileExistsError:
+                n += 1
+                path = base.with_name(f"{base.name}-{n}")
+            except OSError as exc:
+                from flighttest.errors import FlighttestError
+
+                raise FlighttestError(f"cannot create log folder {path} ({exc.strerror})") from None
+        self.dir = path
+        self.t0_mono = time.monotonic() if t0_mono is None else t0_mono
+        self.unix0 = time.time() - (time.monotonic() - self.t0_mono)
+        self._files: list[IO[str]] = []
+        self._setpoints = self._open_csv("setpoints.csv", SETPOINT_COLUMNS)
+        self._guard = self._open_csv("guard.csv", GUARD_COLUMNS)
+        self._events = self._open("events.jsonl")
+        self._last_flush = time.monotonic()
+        self.closed = False
+
+    # -- paths -----------------------------------------------------------------------------------
+    @property
+    def tlog_path(self) -> Path:
+        return self.dir / "flight.tlog"
+
+    def _open(self, name: str) -> IO[str]:
+        f = open(self.dir / name, "w", encoding="utf-8", newline="")  # noqa: SIM115 (kept open)
+        self._files.append(f)
+        return f
+
+    def _open_csv(self, name: str, columns: tuple[str, ...]):
+        f = self._open(name)
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(columns)
+        f.flush()
+        return w
+
+    def times(self, t_mono: float) -> tuple[float, float]:
+        dt = t_mono - self.t0_mono
+        return dt, self.unix0 + dt
+
+    # -- rows ------------------------------------------------------------------------------------
+    def setpoint(self, t_mono: float, phase: str, n, e, d, vn, ve, vd, an, ae, ad, yaw_deg) -> None:
+        if self.closed:
+            return
+        t, u = self.times(t_mono)
+        self._setpoints.writerow([_fmt(float(x)) for x in (t, u, n, e, d, vn, ve, vd, an, ae, ad, yaw_deg)] + [phase])
+        self.flush_if_due()
+
+    def guard(self, decision) -> None:
+        """One guard decision with the inputs it was made from (``flighttest.guard.Decision``)."""
+        if self.closed:
+            return
+        t, u = self.times(decision.t_s)
+        s = decision.sample
+        inputs = (
+            (s.vn_mps, s.ve_mps, s.vd_mps, s.qw, s.qx, s.qy, s.qz, s.wn_mps, s.we_mps, s.wd_mps, s.alt_m)
+            if s is not None
+            else (math.nan,) * 11
+        )
+        row = [t, u, decision.verdict, decision.w_mps, decision.u_mps, decision.margin_mps,
+               decision.predicted_margin_mps, decision.action, decision.reason, *inputs]  # fmt: skip
+        self._guard.writerow([_fmt(float(x)) if isinstance(x, float | int) else x for x in row])
+        self.flush_if_due()
+
+    def event(self, t_mono: float, event: str, **fields: Any) -> None:
+        if self.closed:
+            return
+        t, u = self.times(t_mono)
+        rec = {"t_s": round(t, 4), "unix_s": round(u, 4), "event": event, **fields}
+        self._events.write(json.dumps(_clean(rec), default=str) + "\n")
+        # events are rare and matter most when something goes wrong: flush them at once
+        self.flush()
+
+    # -- whole files -----------------------------------------------------------------------------
+    def write_meta(self, meta: dict[str, Any]) -> None:
+        from flighttest import __version__
+
+        base = {
+            "start_unix_s": round(self.unix0, 3),
+            "versions": {"flighttest": __version__, "python": platform.python_version(), **_lib_versions()},
+        }
+        write_json_atomic(self.dir / "meta.json", {**base, **meta})
+
+    def write_preflight(self, data: Any) -> None:
+        write_json_atomic(self.dir / "preflight.json", data)
+
+    def write_summary(self, summary: dict[str, Any]) -> None:
+        write_json_atomic(self.dir / "summary.json", {**summary, "log_dir": str(self.dir)})
+
+    def save_trajectory(self, traj) -> None:
+        traj.save(self.dir / "trajectory")
+
+    # -- flushing --------------------------------------------------------------------------------
+    def flush_if_due(self) -> None:
+        if time.monotonic() - self._last_flush >= FLUSH_EVERY_S:
+            self.flush()
+
+    def flush(self) -> None:
+        for f in self._files:
+            if not f.closed:
+                f.flush()
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.flush()
+        for f in self._files:
+            f.close()
+        self.closed = True
+
+
+def _lib_versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for name in ("mavsdk", "pymavlink", "numpy"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "?"
+    return out

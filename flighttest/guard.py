@@ -1,0 +1,401 @@
+"""The live VRS guard and its abort ladder: pure decision logic, no I/O, testable without a vehicle.
+
+``Guard.on_sample`` judges one telemetry sample (NED velocity, attitude, wind, altitude, the
+streamer's commanded acceleration) and returns a ``Decision`` carrying every input it used, so the
+flight log can replay why it acted. ``Guard.on_tick`` catches stale telemetry between samples.
+``AbortLadder`` turns a trigger into the sequence recovery setpoint → Hold → Land and tells the
+runner which command to send next; the runner only executes.
+
+Frames and signs follow NOTES §1: NED, body FRD, ``w > 0`` means air flows up through the disk.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+from flighttest.aero import G_MPS2
+from flighttest.frames import GuardRegion
+
+# Verdicts (guard.csv ``verdict``)
+OK = "ok"
+PREDICTED = "predicted"  # measured state allowed, the state a horizon ahead is not
+MARGINAL = "marginal"  # measured inside the region by less than the clear-violation band
+VIOLATION = "violation"  # measured inside the region beyond the band: acts on the first sample
+STALE = "stale"
+NON_FINITE = "non_finite"
+FLOOR = "altitude_floor"
+SPEED_CAP = "descent_speed_cap"
+FLUCTUATION = "fluctuation"
+
+# Actions (guard.csv ``action``)
+NONE = "none"
+ABORT = "abort"
+OBSERVE = "observe"  # region verdict logged but not acted on (probe flights)
+
+
+@dataclass(frozen=True)
+class GuardLimits:
+    """What the guard enforces; every threshold comes from the vehicle profile or the mission config."""
+
+    region: GuardRegion
+    telemetry_period_s: float = 0.02
+    stale_periods: float = 3.0
+    horizon_s: float = 0.2
+    debounce_samples: int = 3
+    clear_violation_mps: float = 0.05
+    observe_region: bool = False
+    min_alt_m: float | None = None
+    max_descent_mps: float | None = None
+    fluct_window_s: float = 0.5
+    max_rate_std_dps: float | None = None
+    max_accel_std_mps2: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (self.telemetry_period_s > 0 and self.stale_periods > 0 and self.horizon_s >= 0):
+            raise ValueError("telemetry period, stale periods must be > 0 and horizon ≥ 0")
+        if self.debounce_samples < 1 or self.clear_violation_mps < 0 or self.fluct_window_s <= 0:
+            raise ValueError("debounce_samples ≥ 1, clear_violation_mps ≥ 0, fluct_window_s > 0")
+
+    @property
+    def stale_after_s(self) -> float:
+        return self.stale_periods * self.telemetry_period_s
+
+
+@dataclass(frozen=True, slots=True)
+class GuardSample:
+    """One telemetry sample as the guard sees it. ``t_s`` is the monotonic arrival time."""
+
+    t_s: float
+    vn_mps: float
+    ve_mps: float
+    vd_mps: float
+    qw: float
+    qx: float
+    qy: float
+    qz: float
+    alt_m: float
+    wn_mps: float = 0.0
+    we_mps: float = 0.0
+    wd_mps: float = 0.0
+    # commanded (feed-forward) acceleration of the setpoint being flown, NED
+    an_cmd_mps2: float = 0.0
+    ae_cmd_mps2: float = 0.0
+    ad_cmd_mps2: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    t_s: float
+    verdict: str
+    action: str
+    reason: str
+    w_mps: float = math.nan
+    u_mps: float = math.nan
+    margin_mps: float = math.nan
+    predicted_margin_mps: float = math.nan
+    sample: GuardSample | None = None
+
+    @property
+    def aborts(self) -> bool:
+        return self.action == ABORT
+
+
+def predicted_blade_velocity_mps(
+    vn, ve, vd, wn, we, wd, an_cmd, ae_cmd, ad_cmd, horizon_s: float
+) -> tuple[float, float]:
+    """``(w, u)`` a horizon ahead: velocity advanced by the commanded acceleration, and the disk tilted
+    as that acceleration needs (thrust along −z_body, so ``z_body ∥ g − a``, NED).
+
+    The attitude loop settles far faster than the horizon, so the commanded tilt is the better guess
+    for where the disk will point than the tilt measured now.
+    """
+    van = vn + an_cmd * horizon_s - wn
+    vae = ve + ae_cmd * horizon_s - we
+    vad = vd + ad_cmd * horizon_s - wd
+    zn, ze, zd = -an_cmd, -ae_cmd, G_MPS2 - ad_cmd
+    zn_norm = math.sqrt(zn * zn + ze * ze + zd * zd)
+    if zn_norm < 1e-6:  # free fall commanded: no thrust direction, assume level
+        zn, ze, zd, zn_norm = 0.0, 0.0, 1.0, 1.0
+    w = (van * zn + vae * ze + vad * zd) / zn_norm
+    speed2 = van * van + vae * vae + vad * vad
+    u = math.sqrt(max(speed2 - w * w, 0.0))
+    return w, u
+
+
+class FluctuationDetector:
+    """Standard deviation of a signal over a sliding time window (the probe's onset detector).
+
+    Fluctuation, not level: a steady turn or steady deceleration does not count, the shaking the
+    VRS brings does. O(1) per sample with running sums.
+    """
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = window_s
+        self._buf: deque[tuple[float, float]] = deque()
+        self._sum = 0.0
+        self._sum2 = 0.0
+
+    def add(self, t_s: float, value: float) -> float:
+        if not math.isfinite(value):
+            return math.nan
+        self._buf.append((t_s, value))
+        self._sum += value
+        self._sum2 += value * value
+        while self._buf and self._buf[0][0] < t_s - self.window_s:
+            _, old = self._buf.popleft()
+            self._sum -= old
+            self._sum2 -= old * old
+        return self.std()
+
+    def std(self) -> float:
+        n = len(self._buf)
+        if n < 5:
+            return 0.0
+        # a window spanning less than half its length is not yet a window
+        if self._buf[-1][0] - self._buf[0][0] < 0.5 * self.window_s:
+            return 0.0
+        mean = self._sum / n
+        return math.sqrt(max(self._sum2 / n - mean * mean, 0.0))
+
+
+class Guard:
+    """Judges each sample; remembers only what debounce, staleness and fluctuation need."""
+
+    def __init__(self, limits: GuardLimits) -> None:
+        self.limits = limits
+        self.last_sample_t: float | None = None
+        self._suspect_run = 0
+        self._rate_std = [FluctuationDetector(limits.fluct_window_s) for _ in range(3)]
+        self._accel_std = FluctuationDetector(limits.fluct_window_s)
+        self.rate_std_dps = 0.0
+        self.accel_std_mps2 = 0.0
+        self.armed = True  # False: decisions are logged with action "none" (e.g. before streaming)
+
+    # -- fluctuation inputs (IMU stream) ---------------------------------------------------------
+    def on_rates(self, t_s: float, p_rps: float, q_rps: float, r_rps: float) -> Decision | None:
+        stds = [d.add(t_s, math.degrees(v)) for d, v in zip(self._rate_std, (p_rps, q_rps, r_rps))]
+        self.rate_std_dps = max((s for s in stds if math.isfinite(s)), default=0.0)
+        lim = self.limits.max_rate_std_dps
+        if lim is not None and self.rate_std_dps > lim:
+            return self._fluct(t_s, f"angular-rate std {self.rate_std_dps:.1f} deg/s > {lim:g} deg/s")
+        return None
+
+    def on_vertical_accel(self, t_s: float, a_down_mps2: float) -> Decision | None:
+        s = self._accel_std.add(t_s, a_down_mps2)
+        self.accel_std_mps2 = s if math.isfinite(s) else self.accel_std_mps2
+        lim = self.limits.max_accel_std_mps2
+        if lim is not None and self.accel_std_mps2 > lim:
+            return self._fluct(
+                t_s, f"vertical-acceleration std {self.accel_std_mps2:.2f} m/s² > {lim:g} m/s²"
+            )
+        return None
+
+    def _fluct(self, t_s: float, reason: str) -> Decision:
+        return Decision(t_s, FLUCTUATION, ABORT if self.armed else NONE, reason)
+
+    # -- state samples ---------------------------------------------------------------------------
+    def on_sample(self, s: GuardSample) -> Decision:
+        lim = self.limits
+        self.last_sample_t = s.t_s
+        act = ABORT if self.armed else NONE
+        values = (s.vn_mps, s.ve_mps, s.vd_mps, s.qw, s.qx, s.qy, s.qz, s.alt_m, s.wn_mps, s.we_mps, s.wd_mps)
+        if not all(math.isfinite(v) for v in values):
+            self._suspect_run = 0
+            return Decision(s.t_s, NON_FINITE, act, "non-finite telemetry", sample=s)
+        qn = math.sqrt(s.qw * s.qw + s.qx * s.qx + s.qy * s.qy + s.qz * s.qz)
+        if abs(qn - 1.0) > 0.05:
+            return Decision(s.t_s, NON_FINITE, act, f"attitude quaternion norm {qn:.3f} ≠ 1", sample=s)
+        _, w, u, margin = lim.region.check(
+            s.vn_mps, s.ve_mps, s.vd_mps, s.qw / qn, s.qx / qn, s.qy / qn, s.qz / qn, s.wn_mps, s.we_mps, s.wd_mps
+        )
+        # a horizon ahead: velocity advanced by the commanded acceleration, disk as measured now. The
+        # vehicle's attitude lags the plan together with its velocity, so pairing the measured state
+        # with the *planned* tilt would see violations that neither the plan nor the vehicle has.
+        h = lim.horizon_s
+        _, wp, up, pmargin = lim.region.check(
+            s.vn_mps + s.an_cmd_mps2 * h, s.ve_mps + s.ae_cmd_mps2 * h, s.vd_mps + s.ad_cmd_mps2 * h,
+            s.qw / qn, s.qx / qn, s.qy / qn, s.qz / qn, s.wn_mps, s.we_mps, s.wd_mps,
+        )  # fmt: skip
+        # … and with the disk tilted as the commanded acceleration needs: act only when both agree
+        # (straight-down acceleration into the region: they do), so tracking lag alone cannot abort
+        wc, uc = predicted_blade_velocity_mps(
+            s.vn_mps, s.ve_mps, s.vd_mps, s.wn_mps, s.we_mps, s.wd_mps,
+            s.an_cmd_mps2, s.ae_cmd_mps2, s.ad_cmd_mps2, h,
+        )  # fmt: skip
+        cmargin = float(lim.region.margin(wc, uc))
+        wp, up, pmargin = float(wp), float(up), float(pmargin)
+        if cmargin > pmargin:
+            wp, up, pmargin = wc, uc, cmargin
+        w, u, margin = float(w), float(u), float(margin)
+
+        def dec(verdict: str, action: str, reason: str) -> Decision:
+            return Decision(s.t_s, verdict, action, reason, w, u, margin, pmargin, s)
+
+        # hard limits first: they hold in observe mode too
+        if lim.min_alt_m is not None and s.alt_m < lim.min_alt_m:
+            return dec(FLOOR, act, f"altitude {s.alt_m:.2f} m below floor {lim.min_alt_m:g} m")
+        if lim.max_descent_mps is not None and s.vd_mps > lim.max_descent_mps:
+            return dec(SPEED_CAP, act, f"descent {s.vd_mps:.2f} m/s above cap {lim.max_descent_mps:g} m/s")
+
+        region_act = OBSERVE if lim.observe_region and self.armed else act
+        if margin < -lim.clear_violation_mps:
+            self._suspect_run = 0
+            return dec(VIOLATION, region_act, f"in guard region: w={w:.2f} m/s, u={u:.2f} m/s")
+        if margin < 0.0 or pmargin < 0.0:
+            self._suspect_run += 1
+            verdict = MARGINAL if margin < 0.0 else PREDICTED
+            if self._suspect_run >= lim.debounce_samples:
+                why = (
+                    f"{verdict} for {self._suspect_run} samples: w={w:.2f} m/s, u={u:.2f} m/s, "
+                    f"predicted w={wp:.2f} m/s, u={up:.2f} m/s"
+                )
+                return dec(verdict, region_act, why)
+            return dec(verdict, NONE, f"debounce {self._suspect_run}/{lim.debounce_samples}")
+        self._suspect_run = 0
+        return dec(OK, NONE, "")
+
+    def on_tick(self, now_s: float) -> Decision | None:
+        """Stale telemetry: no sample for ``stale_periods`` telemetry periods."""
+        if self.last_sample_t is None:
+            return None
+        age = now_s - self.last_sample_t
+        if age > self.limits.stale_after_s:
+            return Decision(
+                now_s, STALE, ABORT if self.armed else NONE,
+                f"no telemetry for {age * 1000:.0f} ms (> {self.limits.stale_after_s * 1000:.0f} ms)",
+            )  # fmt: skip
+        return None
+
+
+# -- the abort ladder --------------------------------------------------------------------------------
+
+
+class Rung(IntEnum):
+    NOMINAL = 0
+    RECOVER = 1  # recovery setpoint: level, arrest the sink, lateral speed away from obstacles
+    HOLD = 2
+    LAND = 3
+    DONE = 4
+
+
+# commands the ladder asks the runner to send
+CMD_RECOVER = "recover"
+CMD_HOLD = "hold"
+CMD_LAND = "land"
+
+
+@dataclass(frozen=True)
+class LadderTiming:
+    recover_max_s: float = 2.0  # give up on the recovery setpoint after this
+    arrested_vd_mps: float = 0.3  # sink counts as arrested below this descent rate …
+    arrested_for_s: float = 0.3  # … held this long
+    hold_confirm_s: float = 3.0  # Hold must show in the flight mode within this, else Land
+    hold_dwell_s: float = 2.0  # time in Hold before landing
+    land_retry_s: float = 3.0  # re-send Land if the mode does not show it
+    land: bool = True  # False (--no-land): the ladder ends in Hold
+
+
+@dataclass
+class LadderObservation:
+    t_s: float
+    vd_mps: float = math.nan
+    region_ok: bool = True
+    telemetry_fresh: bool = True
+    mode: str = ""  # MAVSDK FlightMode name, e.g. "OFFBOARD", "HOLD", "LAND"
+    landed: bool = False
+    link_ok: bool = True
+
+
+@dataclass
+class AbortLadder:
+    """State machine recovery → Hold → Land. ``trigger`` and ``step`` return the command to send now
+    (or ``None``); rungs only go up. The first trigger's reason is *the* abort reason."""
+
+    timing: LadderTiming = field(default_factory=LadderTiming)
+    rung: Rung = Rung.NOMINAL
+    reason: str = ""
+    entered_t: float = 0.0
+    _arrested_since: float | None = None
+    _hold_seen_t: float | None = None
+    _last_land_t: float = -math.inf
+    history: list[tuple[float, str, str]] = field(default_factory=list)
+
+    @property
+    def active(self) -> bool:
+        return self.rung != Rung.NOMINAL
+
+    @property
+    def done(self) -> bool:
+        return self.rung == Rung.DONE
+
+    def trigger(self, t_s: float, reason: str, first: Rung = Rung.RECOVER) -> str | None:
+        if not self.reason:
+            self.reason = reason
+        if self.rung >= first:
+            return None
+        return self._enter(t_s, first, reason)
+
+    def escalate(self, t_s: float, why: str) -> str | None:
+        """Skip to the next rung now (a second Ctrl-C, a failed command)."""
+        if self.rung in (Rung.NOMINAL, Rung.LAND, Rung.DONE):
+            return None
+        nxt = Rung(self.rung + 1)
+        if nxt == Rung.LAND and not self.timing.land:
+            return None
+        return self._enter(t_s, nxt, why)
+
+    def _enter(self, t_s: float, rung: Rung, why: str) -> str | None:
+        self.rung = rung
+        self.entered_t = t_s
+        self._arrested_since = None
+        self._hold_seen_t = None
+        self.history.append((t_s, rung.name, why))
+        if rung == Rung.RECOVER:
+            return CMD_RECOVER
+        if rung == Rung.HOLD:
+            return CMD_HOLD
+        if rung == Rung.LAND:
+            self._last_land_t = t_s
+            return CMD_LAND
+        return None
+
+    def step(self, ob: LadderObservation) -> str | None:
+        tm, t = self.timing, ob.t_s
+        if self.rung == Rung.RECOVER:
+            arrested = ob.telemetry_fresh and ob.region_ok and ob.vd_mps <= tm.arrested_vd_mps
+            if arrested:
+                self._arrested_since = t if self._arrested_since is None else self._arrested_since
+                if t - self._arrested_since >= tm.arrested_for_s:
+                    return self._enter(t, Rung.HOLD, "sink arrested")
+            else:
+                self._arrested_since = None
+            if t - self.entered_t >= tm.recover_max_s:
+                return self._enter(t, Rung.HOLD, f"recovery not confirmed within {tm.recover_max_s:g} s")
+        elif self.rung == Rung.HOLD:
+            if ob.landed:
+                return self._enter(t, Rung.DONE, "on the ground")
+            if ob.mode == "HOLD":
+                self._hold_seen_t = t if self._hold_seen_t is None else self._hold_seen_t
+                if not tm.land:
+                    return self._enter(t, Rung.DONE, "holding (--no-land)")
+                if t - self._hold_seen_t >= tm.hold_dwell_s:
+                    return self._enter(t, Rung.LAND, "hold dwell over")
+            elif ob.mode == "LAND":  # the autopilot chose to land itself: follow it, send nothing
+                self._enter(t, Rung.LAND, "autopilot landing")
+                return None
+            elif t - self.entered_t >= tm.hold_confirm_s:
+                why = f"Hold not confirmed within {tm.hold_confirm_s:g} s (mode {ob.mode or 'unknown'})"
+                if not tm.land:
+                    return self._enter(t, Rung.DONE, why)
+                return self._enter(t, Rung.LAND, why)
+        elif self.rung == Rung.LAND:
+            if ob.landed:
+                return self._enter(t, Rung.DONE, "landed")
+            if ob.mode != "LAND" and t - self._last_land_t >= tm.land_retry_s:
+                self._last_land_t = t
+                self.history.append((t, "LAND", f"re-sending Land (mode {ob.mode or 'unknown'})"))
+                return CMD_LAND
+        return None

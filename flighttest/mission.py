@@ -1,0 +1,584 @@
+"""The mission runner: connect → preflight → arm → take off → climb to the start height → settle →
+stream the trajectory → settle → land (or hold with ``--no-land``).
+
+Ctrl-C, SIGTERM, an exception, a guard abort, stale telemetry, link loss or leaving offboard at any
+point cancel the nominal flow and run the abort ladder (``flighttest.guard.AbortLadder``) until the
+vehicle is held or on the ground; a second Ctrl-C skips to the next rung. The outcome, its reason
+and the log folder come back as a ``FlightOutcome``; ``summary.json`` is written last.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import signal
+import sys
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from flighttest import guard as gd
+from flighttest.errors import FlighttestError
+from flighttest.flightlog import FlightLog
+from flighttest.link import VehicleLink
+from flighttest.missions_config import MissionConfig
+from flighttest.preflight import PreflightResult, param_checks, trajectory_checks, trajectory_stats, vehicle_checks
+from flighttest.profiles import VehicleProfile
+from flighttest.streamer import Setpoint, SetpointStreamer
+from flighttest.trajectory import Trajectory
+
+PILOT_MODES = {"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE"}
+CLIMB_RATE_MPS = 1.0
+START_TOL_M = 0.3
+SETTLE_SPEED_MPS = 0.25
+LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
+LADDER_TIMEOUT_S = 120.0
+
+
+@dataclass
+class FlyRequest:
+    connect: str
+    profile: VehicleProfile
+    config: MissionConfig
+    trajectory: Trajectory  # relative to its start point, as planned
+    mission_name: str
+    trajectory_path: str = ""
+    sysid: int | None = None
+    yes: bool = False
+    dry_run: bool = False
+    wind_ned_mps: tuple[float, float, float] | None = None
+    log_root: Path = Path("logs")
+    show_panel: bool = False
+    confirm: Callable[[PreflightResult], bool] | None = None  # go/no-go prompt
+    print_fn: Callable[[Any], None] = print
+
+
+@dataclass
+class FlightOutcome:
+    outcome: str  # completed | aborted | probe_stopped | refused | dry_run
+    abort_reason: str | None
+    descent_time_s: float | None
+    log_dir: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def exit_code(self) -> int:
+        return {"completed": 0, "dry_run": 0, "probe_stopped": 0, "refused": 2}.get(self.outcome, 1)
+
+    def summary(self) -> dict[str, Any]:
+        return {"outcome": self.outcome, "abort_reason": self.abort_reason,
+                "descent_time_s": self.descent_time_s, "log_dir": self.log_dir, **self.extra}  # fmt: skip
+
+
+class _Refused(Exception):
+    pass
+
+
+class MissionRunner:
+    def __init__(self, req: FlyRequest) -> None:
+        self.req = req
+        self.cfg = req.config
+        self.fl = req.config.flight
+        self.mission_name = req.mission_name
+        self.phase = "init"
+        self.link: VehicleLink | None = None
+        self.streamer: SetpointStreamer | None = None
+        self.log: FlightLog | None = None
+        self.last_decision: gd.Decision | None = None
+        self.ladder = gd.AbortLadder(gd.LadderTiming(
+            recover_max_s=self.cfg.abort.recover_max_s, arrested_vd_mps=self.cfg.abort.arrested_vd_mps,
+            hold_confirm_s=self.cfg.abort.hold_confirm_s, hold_dwell_s=self.cfg.abort.hold_dwell_s,
+            land=self.fl.land,
+        ))  # fmt: skip
+        region = req.profile.guard_region()
+        g = self.cfg.guard
+        self.limits = gd.GuardLimits(
+            region=region, telemetry_period_s=1.0 / self.fl.telemetry_hz, stale_periods=g.stale_periods,
+            horizon_s=g.horizon_s, debounce_samples=g.debounce_samples, clear_violation_mps=g.clear_violation_mps,
+            observe_region=g.observe_region, min_alt_m=self.fl.min_alt_m, max_descent_mps=g.max_descent_mps,
+            fluct_window_s=g.fluct_window_s, max_rate_std_dps=g.max_rate_std_dps,
+            max_accel_std_mps2=g.max_accel_std_mps2,
+        )  # fmt: skip
+        self.guard = gd.Guard(self.limits)
+        self.guard.armed = False
+        self.floor_active = False
+        self.traj = req.trajectory.resample(self.fl.rate_hz)
+        self.origin: tuple[float, float, float] | None = None
+        self.end_point: tuple[float, float, float] | None = None
+        self.t_stream_start: float | None = None
+        self.descent_time_s: float | None = None
+        self.expect_offboard = False
+        self.abort_event = asyncio.Event()
+        self.abort_verdict = ""
+        self._ladder_cmds: asyncio.Queue[str] = asyncio.Queue()
+        self._recovery_task: asyncio.Task | None = None
+        self._bg: list[asyncio.Task] = []
+        self._signals = 0
+        self.first_inside_region_t: float | None = None
+
+    # -- helpers -------------------------------------------------------------------------------------
+    def event(self, name: str, **fields: Any) -> None:
+        if self.log is not None:
+            self.log.event(time.monotonic(), name, **fields)
+
+    def set_phase(self, phase: str) -> None:
+        self.phase = phase
+        self.event("phase", phase=phase)
+
+    def abort(self, reason: str, first: gd.Rung = gd.Rung.RECOVER, verdict: str = "") -> None:
+        """Start (or join) the abort ladder; safe to call from any callback on the loop."""
+        if self.ladder.done:
+            return
+        first_time = not self.ladder.active
+        cmd = self.ladder.trigger(time.monotonic(), reason, first)
+        if first_time:
+            self.abort_verdict = verdict
+            self.guard.armed = False  # decisions keep being logged; the ladder is in charge now
+            self.event("abort", reason=reason, rung=self.ladder.rung.name, phase=self.phase)
+        if cmd:
+            self._ladder_cmds.put_nowait(cmd)
+        self.abort_event.set()
+
+    # -- telemetry listeners -------------------------------------------------------------------------
+    def _wind(self) -> tuple[float, float, float]:
+        st = self.link.state
+        if st.wind_ned_mps is not None:
+            return st.wind_ned_mps
+        return self.req.wind_ned_mps or (0.0, 0.0, 0.0)
+
+    def _on_posvel(self, t: float) -> None:
+        st = self.link.state
+        acc = self.streamer.planned_accel_mps2(self.limits.horizon_s) if self.streamer is not None else (0, 0, 0)
+        s = gd.GuardSample(t, st.vn_mps, st.ve_mps, st.vd_mps, *st.q, st.alt_m, *self._wind(), *acc)
+        d = self.guard.on_sample(s)
+        if not self.floor_active and d.verdict == gd.FLOOR:
+            # below the floor is normal on the ground and in takeoff/landing: judge the rest
+            saved = self.limits
+            self.guard.limits = gd.GuardLimits(**{**saved.__dict__, "min_alt_m": None})
+            d = self.guard.on_sample(s)
+            self.guard.limits = saved
+        self.last_decision = d
+        if self.log is not None:
+            self.log.guard(d)
+        if d.margin_mps < 0 and self.first_inside_region_t is None and self.phase == "stream":
+            self.first_inside_region_t = t
+        if d.aborts:
+            self.abort(d.reason, verdict=d.verdict)
+        if self.t_stream_start is not None and self.descent_time_s is None and self.end_point is not None:
+            dn, de, dd = (st.n_m - self.end_point[0], st.e_m - self.end_point[1], st.d_m - self.end_point[2])
+            speed = math.sqrt(st.vn_mps**2 + st.ve_mps**2 + st.vd_mps**2)
+            if math.sqrt(dn * dn + de * de + dd * dd) <= 0.2 and speed <= 0.3 and self.phase in ("stream", "settle"):
+                self.descent_time_s = t - self.t_stream_start
+                self.event("descent_reached", descent_time_s=round(self.descent_time_s, 3))
+
+    def _on_imu(self, t: float) -> None:
+        st = self.link.state
+        for d in (self.guard.on_rates(t, *st.rates_rps), self.guard.on_vertical_accel(t, st.accel_frd_mps2[2])):
+            if d is not None:
+                if self.log is not None:
+                    self.log.guard(d)
+                if d.aborts:
+                    self.abort(d.reason, verdict=d.verdict)
+
+    def _on_mode(self, old: str, new: str) -> None:
+        self.event("mode", old=old, new=new)
+        if not self.expect_offboard or new == "OFFBOARD" or self.ladder.active:
+            return
+        if new in PILOT_MODES:
+            self.abort(f"pilot took over ({new})", gd.Rung.HOLD)
+            self.ladder._enter(time.monotonic(), gd.Rung.DONE, f"pilot in control ({new})")
+        elif new == "LAND":
+            self.abort(f"left offboard unexpectedly ({old} → {new})", gd.Rung.HOLD)
+        else:
+            self.abort(f"left offboard unexpectedly ({old} → {new})", gd.Rung.HOLD)
+
+    def _on_connection(self, connected: bool) -> None:
+        self.event("link", connected=connected)
+        if not connected and self.guard.armed:
+            self.abort("link lost", gd.Rung.HOLD)
+
+    async def _stale_ticker(self) -> None:
+        period = self.limits.telemetry_period_s
+        while True:
+            await asyncio.sleep(period)
+            d = self.guard.on_tick(time.monotonic())
+            if d is not None and d.aborts:
+                self.last_decision = d
+                if self.log is not None:
+                    self.log.guard(d)
+                self.abort(d.reason, verdict=d.verdict)
+            if self.log is not None:
+                self.log.flush_if_due()
+
+    # -- the run -------------------------------------------------------------------------------------
+    async def run(self) -> FlightOutcome:
+        req = self.req
+        self.log = FlightLog(req.log_root, self.mission_name)
+        self.log.write_meta({
+            "mission": self.mission_name, "config": self.cfg.to_dict(), "vehicle": req.profile.summary(),
+            "trajectory_path": req.trajectory_path, "trajectory_meta": req.trajectory.meta,
+            "connect": req.connect, "sysid": req.sysid, "dry_run": req.dry_run,
+            "wind_ned_mps": req.wind_ned_mps, "argv": sys.argv,
+        })  # fmt: skip
+        self.log.save_trajectory(req.trajectory)
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.add_signal_handler(sig, self._on_signal, sig.name)
+        outcome: FlightOutcome | None = None
+        try:
+            outcome = await self._run_linked()
+        except _Refused as exc:
+            outcome = self._outcome("refused", str(exc))
+        except FlighttestError as exc:
+            outcome = self._outcome("refused", str(exc))
+        finally:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                    loop.remove_signal_handler(sig)
+            if outcome is None:  # an unexpected error escaped: still leave a summary
+                outcome = self._outcome("aborted", self.ladder.reason or "internal error")
+            self.event("end", outcome=outcome.outcome, reason=outcome.abort_reason)
+            self.log.write_summary(outcome.summary())
+            self.log.close()
+        return outcome
+
+    def _on_signal(self, name: str) -> None:
+        self._signals += 1
+        self.event("signal", signal=name, count=self._signals)
+        if self.ladder.active:
+            cmd = self.ladder.escalate(time.monotonic(), f"{name} again")
+            if cmd:
+                self._ladder_cmds.put_nowait(cmd)
+        else:
+            self.abort(f"{name} from the operator", verdict="signal")
+
+    def _outcome(self, outcome: str, reason: str | None) -> FlightOutcome:
+        extra: dict[str, Any] = {"mission": self.mission_name, "phase_at_end": self.phase}
+        if self.streamer is not None:
+            j = self.streamer.jitter()
+            extra.update(setpoint_jitter_p99_ms=j["p99_ms"], setpoint_rate_hz=j["rate_hz"],
+                         setpoints_sent=self.streamer.sent, watchdog_fired=self.streamer.watchdog_fired)  # fmt: skip
+        if self.link is not None:
+            st = self.link.state
+            extra.update(final_mode=st.flight_mode, final_armed=st.armed, final_landed_state=st.landed_state,
+                         final_alt_m=st.alt_m)  # fmt: skip
+        if self.ladder.history:
+            extra["ladder"] = [{"t_s": round(t - self.log.t0_mono, 3), "rung": r, "why": w}
+                               for t, r, w in self.ladder.history]  # fmt: skip
+        if self.abort_verdict:
+            extra["abort_verdict"] = self.abort_verdict
+        return FlightOutcome(outcome, reason, self.descent_time_s, str(self.log.dir), extra)
+
+    async def _run_linked(self) -> FlightOutcome:
+        req = self.req
+        link = VehicleLink(req.connect, sysid=req.sysid, tlog_path=self.log.tlog_path,
+                           telemetry_hz=self.fl.telemetry_hz, connect_timeout_s=self.fl.connect_timeout_s,
+                           on_event=lambda n, f: self.event(n, **f))  # fmt: skip
+        self.link = link
+        self.set_phase("connect")
+        connect_task = asyncio.create_task(link.open())
+        try:
+            await self._race(connect_task)
+        except BaseException:
+            await link.close()
+            raise
+        if self.ladder.active:  # Ctrl-C while connecting
+            await link.close()
+            return self._outcome("aborted", self.ladder.reason)
+        try:
+            self.streamer = SetpointStreamer(link.offboard._plugin, self.log, self.fl.rate_hz)
+            link.on_posvel.append(self._on_posvel)
+            link.on_imu.append(self._on_imu)
+            link.on_mode.append(self._on_mode)
+            link.on_connection.append(self._on_connection)
+            self._bg.append(asyncio.create_task(self._stale_ticker()))
+            panel = None
+            if req.show_panel:
+                from flighttest.console import console
+                from flighttest.panel import LivePanel
+
+                panel = LivePanel(self, console)
+            with panel if panel is not None else contextlib.nullcontext():
+                return await self._fly()
+        finally:
+            for t in self._bg:
+                t.cancel()
+            await asyncio.gather(*self._bg, return_exceptions=True)
+            if self._recovery_task is not None:
+                self._recovery_task.cancel()
+                await asyncio.gather(self._recovery_task, return_exceptions=True)
+            if self.streamer is not None:
+                self.streamer.stop_watchdog()
+            await link.close()
+
+    async def _race(self, task: asyncio.Task):
+        """Await ``task`` unless an abort comes first (then cancel it). Re-raises the task's error."""
+        waiter = asyncio.create_task(self.abort_event.wait())
+        try:
+            await asyncio.wait({task, waiter}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            waiter.cancel()
+        if not task.done():
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+            return None
+        return task.result()
+
+    async def _fly(self) -> FlightOutcome:
+        req = self.req
+        pre = await self._preflight()
+        req.print_fn(pre.table(f"Preflight — {self.mission_name} on '{req.profile.name}'"))
+        if not pre.ok:
+            raise _Refused(f"preflight failed: {pre.first_failure()}")
+        if self.ladder.active:
+            return self._outcome("aborted", self.ladder.reason)
+        if req.dry_run:
+            self.set_phase("dry_run")
+            return self._outcome("dry_run", None)
+        if not req.yes:
+            if not sys.stdin.isatty():
+                raise _Refused("no terminal to confirm arming: pass --yes to fly without the go/no-go prompt")
+            if req.confirm is None or not req.confirm(pre):
+                raise _Refused("no-go from the operator")
+            self.event("go", by="operator")
+        flow = asyncio.create_task(self._nominal())
+        try:
+            result = await self._race(flow)
+        except Exception as exc:  # the flow failed: treat like any other abort
+            self.event("exception", error=repr(exc), traceback=traceback.format_exc())
+            self.abort(f"error: {exc}", verdict="exception")
+            result = None
+        if not self.ladder.active and result is not None:
+            return result
+        await self._run_ladder()
+        outcome = "aborted"
+        if self.cfg.mission == "probe" and self.abort_verdict in (gd.FLUCTUATION, gd.SPEED_CAP):
+            outcome = "probe_stopped"
+        return self._outcome(outcome, self.ladder.reason)
+
+    async def _preflight(self) -> PreflightResult:
+        self.set_phase("preflight")
+        link, req = self.link, self.req
+        await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
+        await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
+        params = {}
+        from flighttest.preflight import ABORT_PARAMS
+
+        for name, kind in ABORT_PARAMS.items():
+            params[name] = await link.get_param(name, kind)
+        accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
+        stats = trajectory_stats(self.traj, self.limits.region, accel)
+        ab = self.cfg.abort
+        checks = vehicle_checks(link.state, time.monotonic(), self.fl.telemetry_hz, self.fl.min_battery_percent)
+        checks += param_checks(params, stats.descent_max_mps, req.profile.w_allow_mps)
+        checks += trajectory_checks(stats, req.profile, self.fl.start_height_m, self.fl.min_alt_m,
+                                    self.fl.geofence_radius_m, ab.recovery_lateral_mps * ab.recovery_s,
+                                    self.cfg.guard.observe_region)  # fmt: skip
+        pre = PreflightResult(checks)
+        self.log.write_preflight({**pre.to_dict(), "params": params, "trajectory": stats.__dict__})
+        self.event("preflight", ok=pre.ok, failures=[c.name for c in pre.failures])
+        return pre
+
+    # -- nominal flow ------------------------------------------------------------------------------
+    async def _nominal(self) -> FlightOutcome:
+        link, fl = self.link, self.fl
+        st = link.state
+        H = fl.start_height_m
+        self.set_phase("arm")
+        self.guard.armed = True
+        await link.call(link.action.arm(), "arm", 10.0)
+        self.event("armed")
+        self.set_phase("takeoff")
+        with contextlib.suppress(Exception):
+            await link.call(link.action.set_takeoff_altitude(H), "set takeoff altitude", 5.0)
+        await link.call(link.action.takeoff(), "takeoff", 10.0)
+        ok = await link.wait_for(lambda s: s.alt_m >= min(H, 2.0) - 0.3 and s.in_air, fl.takeoff_timeout_s)
+        if not ok:
+            raise RuntimeError(f"takeoff did not reach {min(H, 2.0):.1f} m within {fl.takeoff_timeout_s:g} s")
+        # offboard from here: climb to the exact start point, holding the trajectory's initial yaw
+        self.set_phase("climb")
+        yaw0 = float(self.traj.df["yaw_deg"].iloc[0])
+        here = Setpoint(st.n_m, st.e_m, st.d_m, yaw_deg=yaw0)
+        self.streamer.send(here, "climb")
+        loop = asyncio.get_running_loop()
+        self.streamer.start_watchdog(lambda: loop.call_soon_threadsafe(lambda: self.event("setpoint_watchdog")))
+        self.expect_offboard = True
+        await link.call(link.offboard.start(), "offboard start", 10.0)
+        self.event("offboard", active=True)
+        start = (st.n_m, st.e_m, -H)
+        d0 = st.d_m
+        n_climb = max(int(abs(start[2] - d0) / CLIMB_RATE_MPS * fl.rate_hz), 1)
+
+        def climb_at(k: int) -> Setpoint | None:
+            if k > n_climb:
+                return None
+            f = k / n_climb
+            return Setpoint(start[0], start[1], d0 + f * (start[2] - d0), yaw_deg=yaw0)
+
+        await self.streamer.stream(climb_at, "climb", lambda: self.ladder.active)
+        self.set_phase("settle")
+        hold = Setpoint(*start, yaw_deg=yaw0)
+        await self._settle(hold, fl.settle_s, fl.settle_s * 3 + 10.0)
+        self.origin = start
+        last = self.traj.df.iloc[-1]
+        self.end_point = (start[0] + last["n_m"], start[1] + last["e_m"], start[2] + last["d_m"])
+        self.set_phase("stream")
+        self.floor_active = True
+        self.t_stream_start = time.monotonic()
+        self.event("stream_start", origin_ned=list(start), rows=len(self.traj.df))
+        res = await self.streamer.fly_trajectory(self.traj, start, lambda: self.ladder.active)
+        self.event("stream_end", result=res, jitter=self.streamer.jitter())
+        end_sp = self.streamer.last.hold() if self.streamer.last else hold
+        self.set_phase("settle")
+        await self._settle(end_sp, fl.settle_s, fl.settle_s * 3 + 10.0)
+        self.floor_active = False
+        self.expect_offboard = False
+        if fl.land:
+            self.set_phase("land")
+            self.guard.armed = False  # landing below the floor is the point; stale/link still end it
+            await link.call(link.action.land(), "land", 10.0)
+            ok = await link.wait_for(lambda s: not s.armed, max(H, 1.0) / 0.5 + 30.0)
+            if not ok:
+                raise RuntimeError("did not land and disarm in time")
+            self.set_phase("landed")
+        else:
+            self.set_phase("hold")
+            await link.call(link.offboard.stop(), "offboard stop", 10.0)
+            if not await link.wait_for(lambda s: s.flight_mode == "HOLD", 5.0):
+                raise RuntimeError("Hold not confirmed after the flight (--no-land)")
+        return self._outcome("completed", None)
+
+    async def _settle(self, sp: Setpoint, min_s: float, max_s: float) -> None:
+        st = self.link.state
+        t0 = time.monotonic()
+        settled_since = None
+
+        def done() -> bool:
+            nonlocal settled_since
+            if self.ladder.active:
+                return True
+            now = time.monotonic()
+            err = math.dist((st.n_m, st.e_m, st.d_m), (sp.n_m, sp.e_m, sp.d_m))
+            speed = math.sqrt(st.vn_mps**2 + st.ve_mps**2 + st.vd_mps**2)
+            if err <= START_TOL_M and speed <= SETTLE_SPEED_MPS:
+                settled_since = now if settled_since is None else settled_since
+            else:
+                settled_since = None
+            if now - t0 >= max_s:
+                raise RuntimeError(f"did not settle at ({sp.n_m:.1f}, {sp.e_m:.1f}, {sp.d_m:.1f}) within {max_s:g} s")
+            return settled_since is not None and now - settled_since >= min(min_s, 1.0) and now - t0 >= min_s
+
+        await self.streamer.stream(lambda k: sp, self.phase, done)
+
+    # -- the abort ladder ----------------------------------------------------------------------------
+    async def _run_ladder(self) -> None:
+        link = self.link
+        st = link.state
+        self.event("ladder_start", reason=self.ladder.reason, rung=self.ladder.rung.name)
+        t_start = time.monotonic()
+        if not st.armed and not st.in_air:
+            self.ladder._enter(time.monotonic(), gd.Rung.DONE, "vehicle on the ground")
+        while not self.ladder.done:
+            while not self._ladder_cmds.empty():
+                await self._execute(self._ladder_cmds.get_nowait())
+            now = time.monotonic()
+            fresh = st.t_posvel is not None and now - st.t_posvel <= self.limits.stale_after_s
+            d = self.last_decision
+            ob = gd.LadderObservation(
+                t_s=now, vd_mps=st.vd_mps, region_ok=d is None or not (d.margin_mps < 0),
+                telemetry_fresh=fresh, mode=st.flight_mode,
+                landed=not st.armed, link_ok=st.connected,  # done when disarmed, not at touchdown
+            )  # fmt: skip
+            before = self.ladder.rung
+            cmd = self.ladder.step(ob)
+            if self.ladder.rung != before:
+                self.event("ladder", rung=self.ladder.rung.name, why=self.ladder.history[-1][2])
+            if cmd:
+                await self._execute(cmd)
+            last_seen = st.t_posvel or t_start
+            if not st.connected and now - last_seen > LINK_GIVE_UP_S:  # heartbeats gone too
+                self.ladder._enter(now, gd.Rung.DONE, "no telemetry: the vehicle's own failsafe is in charge")
+                self.event("ladder", rung="DONE", why=self.ladder.history[-1][2])
+            elif now - t_start > LADDER_TIMEOUT_S:
+                self.ladder._enter(now, gd.Rung.DONE, "ladder timed out")
+                self.event("ladder", rung="DONE", why=self.ladder.history[-1][2])
+            await asyncio.sleep(0.05)
+        self.event("ladder_end", history=[(round(t - self.log.t0_mono, 3), r, w) for t, r, w in self.ladder.history],
+                   mode=st.flight_mode, armed=st.armed)  # fmt: skip
+
+    async def _execute(self, cmd: str) -> None:
+        link, st = self.link, self.link.state
+        self.event("ladder_command", command=cmd)
+        try:
+            if cmd == gd.CMD_RECOVER:
+                if st.flight_mode != "OFFBOARD" or self.phase not in ("climb", "settle", "stream"):
+                    nxt = self.ladder.escalate(time.monotonic(), f"not in offboard ({st.flight_mode})")
+                    if nxt:
+                        await self._execute(nxt)
+                    return
+                self._recovery_task = asyncio.create_task(self._recover())
+            elif cmd == gd.CMD_HOLD:
+                await self._stop_recovery()
+                if math.isfinite(st.n_m):
+                    yaw = self.streamer.last.yaw_deg if self.streamer.last else 0.0
+                    self.streamer.leave_hold(st.n_m, st.e_m, st.d_m, yaw, "abort_hold")
+                if st.flight_mode == "OFFBOARD":
+                    await link.call(link.offboard.stop(), "offboard stop (hold)", 5.0)
+                else:
+                    await link.call(link.action.hold(), "hold", 5.0)
+            elif cmd == gd.CMD_LAND:
+                await self._stop_recovery()
+                await link.call(link.action.land(), "land", 5.0)
+        except Exception as exc:
+            self.event("ladder_command_failed", command=cmd, error=str(exc))
+            if cmd == gd.CMD_HOLD:
+                nxt = self.ladder.escalate(time.monotonic(), f"hold failed: {exc}")
+                if nxt:
+                    self._ladder_cmds.put_nowait(nxt)
+
+    async def _stop_recovery(self) -> None:
+        if self._recovery_task is not None:
+            self._recovery_task.cancel()
+            await asyncio.gather(self._recovery_task, return_exceptions=True)
+            self._recovery_task = None
+
+    def _recovery_direction(self) -> tuple[float, float]:
+        """Unit horizontal direction for the escape: keep moving the way we move (it adds u and the
+        plan cleared that path); when nearly still, back towards the start point (the plan's clear
+        area); else the nose direction."""
+        st = self.link.state
+        vh = math.hypot(st.vn_mps, st.ve_mps)
+        if vh > 0.3:
+            return st.vn_mps / vh, st.ve_mps / vh
+        if self.origin is not None:
+            dn, de = self.origin[0] - st.n_m, self.origin[1] - st.e_m
+            dist = math.hypot(dn, de)
+            if dist > 0.5:
+                return dn / dist, de / dist
+        yaw = math.radians(self.streamer.last.yaw_deg if self.streamer.last else 0.0)
+        return math.cos(yaw), math.sin(yaw)
+
+    async def _recover(self) -> None:
+        """Rung 1: level, arrest the sink (small climb), add lateral speed; then hold position."""
+        ab, st = self.cfg.abort, self.link.state
+        un, ue = self._recovery_direction()
+        yaw = self.streamer.last.yaw_deg if self.streamer.last else 0.0
+        lat = ab.recovery_lateral_mps
+
+        def rec_at(k: int) -> Setpoint:
+            return Setpoint(st.n_m, st.e_m, st.d_m, un * lat, ue * lat, -ab.recovery_climb_mps, yaw_deg=yaw,
+                            velocity_only=True)  # fmt: skip
+
+        ticks = max(int(ab.recovery_s * self.fl.rate_hz), 1)
+        await self.streamer.stream(rec_at, "recover", max_ticks=ticks)
+        hold = Setpoint(st.n_m, st.e_m, st.d_m, yaw_deg=yaw)
+        await self.streamer.stream(lambda k: hold, "recover_hold")
+
+
+async def fly(req: FlyRequest) -> FlightOutcome:
+    return await MissionRunner(req).run()

@@ -1,0 +1,421 @@
+"""Planar minimum-time descent (paper §IV-B, eq. 2Deom) with the body-frame VRS/WBS constraint.
+
+Model (NED, Z down, roll φ about the north axis): states ``(Y, V_Y, Z, V_Z, φ)``, inputs
+``(f_coll, ω)`` with ``f_coll`` the collective thrust per unit mass (m/s²) and ω the roll rate:
+
+    Ẏ = V_Y,  V̇_Y = f_coll·sinφ,  Ż = V_Z,  V̇_Z = −f_coll·cosφ + g,  φ̇ = ω.
+
+Hover to hover: everything zero at t = 0 except ``f_coll = g``; at ``t_f`` ``Z = height``, V = 0,
+``φ ≡ 0`` (mod 2π when flips are allowed: a full roll ends level too), ``f_coll = g``, ``ω = 0``;
+final Y fixed or free within its bound. Cost: ``t_f``.
+
+Constraint: ``VelocityConstraint`` on the air-relative body-frame velocity (``cone.py`` explains the
+smooth, sound formulation of both ``|u|`` branches). Non-convexity is handled by solving from
+several kinematically consistent initial guesses (oblique either way, zig-zags with 1–3 reversals,
+flips forward/backward and there-and-back) on a coarse mesh, and refining the best on a finer mesh
+warm-started from it. The winner is re-simulated at 1 kHz with the interpolated controls to
+measure the true worst margin between the nodes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import casadi as ca
+import numpy as np
+
+from flighttest.aero import G_MPS2
+from flighttest.errors import FlighttestError
+from flighttest.planner.cone import VelocityConstraint, planar_blade_velocity
+from flighttest.planner.ocp import (
+    MinTimeOcp,
+    OcpResult,
+    OcpSpec,
+    refined_mesh,
+    resample_guess,
+    rk4_resimulate,
+)
+
+NX, NU = 5, 2
+IY, IVY, IZ, IVZ, IPHI = range(NX)
+
+
+@dataclass(frozen=True)
+class PlanarProblem:
+    """Inputs and bounds of one planar problem (m, m/s, m/s², rad, rad/s)."""
+
+    height_m: float = 5.0
+    y_bound_m: float = 15.0
+    y_final: str = "fixed"  # "fixed" (= y_final_m) or "free" (anywhere within ±y_bound)
+    y_final_m: float = 0.0
+    phi_bound_rad: float | None = math.pi / 3  # None: free (flips allowed)
+    v_bound_mps: float = 10.0
+    z_bound_m: float = 15.0
+    f_min_mps2: float = -20.0
+    f_max_mps2: float = 20.0
+    omega_max_rps: float = 1.0
+    constraint: VelocityConstraint = field(default_factory=VelocityConstraint)
+    wind_y_mps: float = 0.0
+    wind_z_mps: float = 0.0
+    n_intervals: int = 80
+    n_coarse: int = 40
+    # Extra margin (m/s) the NLP keeps from the constraint so that the flown, continuous trajectory
+    # respects it *between* the mesh nodes too (riding the cone, the chord between two nodes cuts
+    # the V of |u| where the side changes). Not part of the reported constraint.
+    backoff_mps: float = 0.0
+
+    def validate(self) -> None:
+        def pos(name, v):
+            if not (math.isfinite(v) and v > 0):
+                raise FlighttestError(f"planar problem: {name} must be a positive number (got {v!r})")
+
+        pos("height", self.height_m)
+        pos("y bound", self.y_bound_m)
+        pos("speed bound", self.v_bound_mps)
+        pos("omega bound", self.omega_max_rps)
+        if self.phi_bound_rad is not None:
+            pos("phi bound", self.phi_bound_rad)
+        if self.y_final not in ("fixed", "free"):
+            raise FlighttestError(f"planar problem: y_final must be 'fixed' or 'free' (got {self.y_final!r})")
+        if abs(self.y_final_m) > self.y_bound_m:
+            raise FlighttestError("planar problem: final Y lies outside the Y bound")
+        if not (self.f_min_mps2 < G_MPS2 < self.f_max_mps2):
+            raise FlighttestError(
+                f"planar problem: thrust range [{self.f_min_mps2:g}, {self.f_max_mps2:g}] m/s² must contain "
+                f"hover (g = {G_MPS2:.2f})"
+            )
+        if self.height_m > self.z_bound_m + 1e-9:
+            raise FlighttestError("planar problem: height exceeds the Z bound")
+        if self.n_intervals < 10 or self.n_coarse < 10:
+            raise FlighttestError("planar problem: need at least 10 mesh intervals")
+
+    def summary(self) -> dict:
+        return {
+            "height_m": self.height_m,
+            "y_bound_m": self.y_bound_m,
+            "y_final": self.y_final,
+            "y_final_m": self.y_final_m if self.y_final == "fixed" else None,
+            "phi_bound_deg": None if self.phi_bound_rad is None else math.degrees(self.phi_bound_rad),
+            "v_bound_mps": self.v_bound_mps,
+            "z_bound_m": self.z_bound_m,
+            "f_min_mps2": self.f_min_mps2,
+            "f_max_mps2": self.f_max_mps2,
+            "omega_max_rps": self.omega_max_rps,
+            "wind_y_mps": self.wind_y_mps,
+            "wind_z_mps": self.wind_z_mps,
+            "n_intervals": self.n_intervals,
+            **self.constraint.summary(),
+        }
+
+
+def dynamics(x, u, sin=ca.sin, cos=ca.cos):
+    """Right-hand side of eq. (2Deom); works on CasADi symbols and (with numpy sin/cos) arrays."""
+    f, om = u[0], u[1]
+    phi = x[IPHI]
+    out = [x[IVY], f * sin(phi), x[IVZ], -f * cos(phi) + G_MPS2, om]
+    return ca.vertcat(*out) if isinstance(x, ca.SX | ca.MX) else np.array(out)
+
+
+def _dynamics_np(x, u):
+    return dynamics(x, u, np.sin, np.cos)
+
+
+@dataclass
+class PlanarSolution:
+    problem: PlanarProblem
+    result: OcpResult
+    attempts: list[dict]
+    solve_s: float
+    check: dict  # fine re-simulation figures
+
+    @property
+    def success(self) -> bool:
+        return self.result.success
+
+    @property
+    def status(self) -> str:
+        return "optimal" if self.result.success else self.result.status
+
+    @property
+    def t_f_s(self) -> float:
+        return self.result.t_f_s
+
+    def blade_velocity(self, x: np.ndarray | None = None):
+        x = self.result.x if x is None else x
+        p = self.problem
+        return planar_blade_velocity(x[:, IVY] - p.wind_y_mps, x[:, IVZ] - p.wind_z_mps, x[:, IPHI])
+
+    def manoeuvre(self) -> dict:
+        return classify(self.result.t_s, self.result.x, self.problem.height_m)
+
+
+def classify(t_s: np.ndarray, x: np.ndarray, height_m: float) -> dict:
+    """Manoeuvre class detected from a solution: flips, oblique, zig-zag (flags plus a label).
+
+    * flips: the vehicle is upside down at some point (|φ| > 90°);
+    * zig-zag: the horizontal motion reverses direction at least once with a swing of more than
+      5 % of the height either side of the reversal (no flips);
+    * oblique: a net sideways displacement of more than 10 % of the height, without reversals.
+    """
+    y = x[:, IY]
+    flips = bool(np.max(np.abs(x[:, IPHI])) > math.pi / 2)
+    swing = 0.05 * height_m
+    # Turning points of Y that matter: extrema separated by more than `swing`.
+    reversals = 0
+    anchor, direction = y[0], 0
+    for val in y[1:]:
+        d = val - anchor
+        if direction >= 0 and d < -swing:
+            reversals += direction > 0
+            direction, anchor = -1, val
+        elif direction <= 0 and d > swing:
+            reversals += direction < 0
+            direction, anchor = 1, val
+        elif (direction > 0 and val > anchor) or (direction < 0 and val < anchor):
+            anchor = val
+    oblique = abs(y[-1] - y[0]) > 0.1 * height_m and reversals == 0
+    zigzag = reversals >= 1 and not flips
+    parts = [n for n, on in (("oblique", oblique), ("zig-zag", zigzag), ("flips", flips)) if on]
+    return {
+        "oblique": oblique,
+        "zigzag": zigzag,
+        "flips": flips,
+        "reversals": reversals,
+        "label": "+".join(parts) if parts else "vertical",
+    }
+
+
+# -- initial guesses ---------------------------------------------------------------------------------
+
+
+def _min_jerk(tau):
+    return 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+
+
+def _guess(p: PlanarProblem, n: int, t_f: float, y_of_tau, phi_of_tau=None, name: str = ""):
+    """Kinematically consistent guess from a path ``Y(τ)`` (τ ∈ [0, 1]) and min-jerk descent."""
+    tau = np.linspace(0.0, 1.0, n + 1)
+    t = tau * t_f
+    y = y_of_tau(tau)
+    z = p.height_m * _min_jerk(tau)
+    vy = np.gradient(y, t)
+    vz = np.gradient(z, t)
+    ay = np.gradient(vy, t)
+    az = np.gradient(vz, t)
+    if phi_of_tau is None:
+        phi = np.arctan2(ay, G_MPS2 - az)
+        if p.phi_bound_rad is not None:
+            phi = np.clip(phi, -p.phi_bound_rad, p.phi_bound_rad)
+    else:
+        phi = phi_of_tau(tau)
+    f = ay * np.sin(phi) + (G_MPS2 - az) * np.cos(phi)
+    f = np.clip(f, p.f_min_mps2, p.f_max_mps2)
+    om = np.clip(np.gradient(phi, t), -p.omega_max_rps, p.omega_max_rps)
+    x = np.stack([y, vy, z, vz, phi], axis=1)
+    u = np.stack([f, om], axis=1)
+    return name, t_f, x, u
+
+
+def initial_guesses(p: PlanarProblem, n: int) -> list[tuple[str, float, np.ndarray, np.ndarray, float]]:
+    """(name, T, X, U, final φ) for the multi-start search."""
+    h = p.height_m
+    # Oblique descent on the cone's edge needs about h/tan(20°) of sideways room.
+    reach = min(0.9 * p.y_bound_m, h / math.tan(math.radians(20.0)))
+    t_slow = max(2.0, 1.2 * h)
+    out = []
+    yf = p.y_final_m
+    if p.phi_bound_rad is not None:
+        if p.y_final == "free":
+            for sgn in (1, -1):
+                out.append(
+                    (*_guess(p, n, t_slow, lambda s, sg=sgn: sg * reach * _min_jerk(s), name=f"oblique{sgn:+d}"), 0.0)
+                )
+        for k in (1, 2, 3):
+            amp = min(0.8 * p.y_bound_m, reach / k)
+            out.append((*_guess(p, n, t_slow * (1 + 0.2 * k),
+                               lambda s, k=k, a=amp: a * np.sin(math.pi * k * s) + yf * _min_jerk(s),
+                               name=f"zigzag{k}"), 0.0))  # fmt: skip
+    else:
+        t_flip = max(2.0, 2 * math.pi / p.omega_max_rps * 0.8)
+        side = reach if p.y_final == "free" else 0.0
+
+        def flip_full(s):
+            return 2 * math.pi * _min_jerk(s)
+
+        def flip_back(s):
+            return math.pi * (1 - np.cos(2 * math.pi * s)) / 2
+
+        def path(s):
+            return side * _min_jerk(s) + (yf * _min_jerk(s) if p.y_final == "fixed" else 0.0)
+
+        out.append((*_guess(p, n, t_flip, path, flip_full, "flip-roll+"), 2 * math.pi))
+        out.append((*_guess(p, n, t_flip, lambda s: -path(s), lambda s: -flip_full(s), "flip-roll-"), -2 * math.pi))
+        out.append((*_guess(p, n, t_flip, path, flip_back, "flip-there-and-back"), 0.0))
+        # A non-flip start is also a candidate: the optimiser may find flips from it or not need them.
+        out.append((*_guess(p, n, t_slow, lambda s: path(s) + 0.3 * reach * np.sin(math.pi * s), name="no-flip"), 0.0))
+    return out
+
+
+# -- the solve ---------------------------------------------------------------------------------------
+
+
+def _spec(p: PlanarProblem, n: int) -> OcpSpec:
+    inf = np.inf
+    phi_b = p.phi_bound_rad if p.phi_bound_rad is not None else 3 * math.pi
+    v = p.v_bound_mps
+    z_lo, z_hi = -p.z_bound_m, max(p.z_bound_m, p.height_m)
+    x_lb = np.array([-p.y_bound_m, -v, z_lo, -v, -phi_b])
+    x_ub = np.array([p.y_bound_m, v, z_hi, v, phi_b])
+    yf_lb, yf_ub = (p.y_final_m, p.y_final_m) if p.y_final == "fixed" else (-p.y_bound_m, p.y_bound_m)
+    xf_lb = np.array([yf_lb, 0.0, p.height_m, 0.0, 0.0])
+    xf_ub = np.array([yf_ub, 0.0, p.height_m, 0.0, 0.0])
+    hover = np.array([G_MPS2, 0.0])
+    con = replace(p.constraint, margin_mps=p.constraint.margin_mps + p.backoff_mps)
+
+    def path(x, u):
+        ub, wb = planar_blade_velocity(x[IVY] - p.wind_y_mps, x[IVZ] - p.wind_z_mps, x[IPHI], ca.cos, ca.sin)
+        return con.slack_casadi(wb, ub)
+
+    return OcpSpec(
+        dynamics=dynamics,
+        nx=NX,
+        nu=NU,
+        n_intervals=n,
+        x_lb=x_lb,
+        x_ub=x_ub,
+        u_lb=np.array([p.f_min_mps2, -p.omega_max_rps]),
+        u_ub=np.array([p.f_max_mps2, p.omega_max_rps]),
+        x_initial=np.zeros(NX),
+        xf_lb=xf_lb,
+        xf_ub=xf_ub,
+        u_initial_lb=hover,
+        u_initial_ub=hover,
+        uf_lb=hover,
+        uf_ub=hover,
+        path=path,
+        path_lb=np.array([0.0]),
+        path_ub=np.array([inf]),
+        t_max_s=60.0,
+        smooth_weight=np.array([1e-6, 1e-4]),
+    )
+
+
+_OCP_CACHE: dict[tuple, MinTimeOcp] = {}
+REFINE_TOL_MPS = 1e-3
+REFINE_ROUNDS = 3
+
+
+def _ocp(p: PlanarProblem, n: int, verbose: bool) -> MinTimeOcp:
+    """The compiled NLP for this problem's structure (constraint, wind, mesh size), built once per
+    process; bounds are plain numbers and are swapped in for each problem."""
+    spec = _spec(p, n)
+    key = (n, p.constraint, p.backoff_mps, p.wind_y_mps, p.wind_z_mps, verbose)
+    ocp = _OCP_CACHE.get(key)
+    if ocp is None:
+        ocp = _OCP_CACHE[key] = MinTimeOcp(spec, verbose=verbose)
+    else:
+        ocp.spec = spec
+        ocp.lbz, ocp.ubz = ocp._bounds()
+    return ocp
+
+
+def _attempt(r: OcpResult) -> dict:
+    return {"guess": r.guess, "status": r.status, "t_f_s": r.t_f_s, "solve_s": r.solve_s, "iterations": r.iterations}
+
+
+def solve_planar(p: PlanarProblem, verbose: bool = False) -> PlanarSolution:
+    """Multi-start on the coarse mesh, refine the best on the fine mesh, then move mesh nodes to
+    where the 1 kHz re-simulation still finds the constraint broken between nodes (≤ 3 rounds)."""
+    p.validate()
+    t0 = time.perf_counter()
+    coarse = _ocp(p, p.n_coarse, verbose)
+    attempts: list[dict] = []
+    best: tuple[OcpResult, float] | None = None
+    fallback: OcpResult | None = None
+    for name, t_g, xg, ug, phi_f in initial_guesses(p, p.n_coarse):
+        xf_lb = coarse.spec.xf_lb.copy()
+        xf_ub = coarse.spec.xf_ub.copy()
+        xf_lb[IPHI] = xf_ub[IPHI] = phi_f
+        r = coarse.solve(t_g, xg, ug, name=name, xf_lb=xf_lb, xf_ub=xf_ub)
+        attempts.append(_attempt(r))
+        if r.success and (best is None or r.t_f_s < best[0].t_f_s):
+            best = (r, phi_f)
+        elif fallback is None or r.max_defect < fallback.max_defect:
+            fallback = r
+    if best is None:
+        sol = PlanarSolution(problem=p, result=fallback, attempts=attempts, solve_s=0.0, check={})
+        sol.check = resimulation_check(sol)
+        sol.solve_s = time.perf_counter() - t0
+        return sol
+    res, phi_f = best
+    fine = _ocp(p, p.n_intervals, verbose)
+    xf_lb = fine.spec.xf_lb.copy()
+    xf_ub = fine.spec.xf_ub.copy()
+    xf_lb[IPHI] = xf_ub[IPHI] = phi_f
+    current = res
+    hot: list[float] = []
+    mesh = None
+    for round_ in range(REFINE_ROUNDS + 1):
+        xg = resample_guess(current.t_s, current.x, p.n_intervals, mesh)
+        ug = resample_guess(current.t_s, current.u, p.n_intervals, mesh)
+        label = f"{res.guess} fine" + (f" refine{round_}" if round_ else "")
+        r = fine.solve(current.t_f_s, xg, ug, name=label, xf_lb=xf_lb, xf_ub=xf_ub, mesh=mesh)
+        attempts.append(_attempt(r))
+        if not r.success:
+            break
+        current = r
+        t_re, margin = _resim_margin(p, current)
+        if margin.min() >= -REFINE_TOL_MPS or round_ == REFINE_ROUNDS:
+            break
+        hot.extend(_violation_times(t_re, margin, REFINE_TOL_MPS))
+        mesh = refined_mesh(np.linspace(0.0, current.t_f_s, p.n_intervals + 1), np.array(hot))
+    sol = PlanarSolution(problem=p, result=current, attempts=attempts, solve_s=0.0, check={})
+    sol.check = resimulation_check(sol)
+    sol.solve_s = time.perf_counter() - t0
+    return sol
+
+
+def _violation_times(t: np.ndarray, margin: np.ndarray, tol: float) -> list[float]:
+    """Times of the worst point of every stretch where ``margin < −tol``."""
+    bad = margin < -tol
+    out = []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(int), [0]])))
+    for a, b in zip(edges[::2], edges[1::2]):
+        out.append(float(t[a + int(np.argmin(margin[a:b]))]))
+    return out
+
+
+def _resim_margin(p: PlanarProblem, r: OcpResult, rate_hz: float = 1000.0):
+    t, x, _ = rk4_resimulate(_dynamics_np, r.t_s, r.x[0], r.u, rate_hz)
+    ub, wb = planar_blade_velocity(x[:, IVY] - p.wind_y_mps, x[:, IVZ] - p.wind_z_mps, x[:, IPHI])
+    return t, p.constraint.margin(wb, ub)
+
+
+def resimulation_check(sol: PlanarSolution, rate_hz: float = 1000.0) -> dict:
+    """Integrate the dynamics at ``rate_hz`` with the interpolated controls; worst margins and
+    end-point errors of what would actually be flown with those controls."""
+    r = sol.result
+    p = sol.problem
+    t, x, _ = rk4_resimulate(_dynamics_np, r.t_s, r.x[0], r.u, rate_hz)
+    ub, wb = planar_blade_velocity(x[:, IVY] - p.wind_y_mps, x[:, IVZ] - p.wind_z_mps, x[:, IPHI])
+    margin = p.constraint.margin(wb, ub)
+    u_nodes, w_nodes = sol.blade_velocity()
+    i = int(np.argmin(margin))
+    end = x[-1]
+    target_y = p.y_final_m if p.y_final == "fixed" else r.x[-1, IY]
+    phi_end = (end[IPHI] + math.pi) % (2 * math.pi) - math.pi
+    return {
+        "rate_hz": rate_hz,
+        "worst_margin_mps": float(margin[i]),
+        "worst_margin_t_s": float(t[i]),
+        "node_worst_margin_mps": float(np.min(p.constraint.margin(w_nodes, u_nodes))),
+        "end_position_error_m": float(math.hypot(end[IY] - target_y, end[IZ] - p.height_m)),
+        "end_speed_mps": float(math.hypot(end[IVY], end[IVZ])),
+        "end_phi_error_deg": float(abs(math.degrees(phi_end))),
+    }
+
+
+def with_omega(p: PlanarProblem, omega_max_rps: float) -> PlanarProblem:
+    return replace(p, omega_max_rps=omega_max_rps)

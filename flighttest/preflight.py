@@ -1,0 +1,235 @@
+"""The preflight checklist: link and health, estimator, battery, abort-relevant PX4 parameters, room
+for the planned trajectory, trajectory limits. Pure functions of what was measured; any ``fail``
+stops the mission before arming, ``warn`` is shown at the go/no-go prompt.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from rich.table import Table
+
+from flighttest.frames import GuardRegion
+from flighttest.guard import predicted_blade_velocity_mps
+from flighttest.link import TelemetryState
+from flighttest.profiles import VehicleProfile
+from flighttest.trajectory import Trajectory
+
+PASS, WARN, FAIL = "pass", "warn", "fail"
+
+# COM_OBL_RC_ACT values (PX4): what the vehicle does when offboard setpoints stop
+OBL_ACTIONS = {0: "Position", 1: "Altitude", 2: "Manual", 3: "Return", 4: "Land", 5: "Hold", 6: "Terminate",
+               7: "Disarm"}  # fmt: skip
+OBL_UNSAFE = {2, 6, 7}  # manual without a pilot, terminate and disarm drop the vehicle
+RC_OVERRIDE_OFFBOARD_BIT = 2  # COM_RC_OVERRIDE bit 1: sticks take over from offboard
+ABORT_PARAMS = {"COM_OF_LOSS_T": "float", "COM_OBL_RC_ACT": "int", "COM_RC_OVERRIDE": "int",
+                "MPC_Z_VEL_MAX_DN": "float"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Check:
+    name: str
+    status: str
+    value: str
+    requirement: str
+
+
+@dataclass
+class PreflightResult:
+    checks: list[Check]
+
+    @property
+    def ok(self) -> bool:
+        return all(c.status != FAIL for c in self.checks)
+
+    @property
+    def failures(self) -> list[Check]:
+        return [c for c in self.checks if c.status == FAIL]
+
+    def first_failure(self) -> str:
+        f = self.failures
+        return f"{f[0].name}: {f[0].value} (needs {f[0].requirement})" if f else ""
+
+    def to_dict(self) -> dict:
+        return {"ok": self.ok, "checks": [asdict(c) for c in self.checks]}
+
+    def table(self, title: str = "Preflight") -> Table:
+        t = Table(title=title)
+        for col in ("check", "status", "value", "requirement"):
+            t.add_column(col)
+        colour = {PASS: "green", WARN: "yellow", FAIL: "bold red"}
+        for c in self.checks:
+            t.add_row(c.name, f"[{colour[c.status]}]{c.status}[/]", c.value, c.requirement)
+        return t
+
+
+# -- trajectory ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrajectoryStats:
+    depth_max_m: float  # deepest point below the start (d_m max)
+    radius_max_m: float  # largest horizontal distance from the start
+    descent_max_mps: float  # largest vd
+    speed_max_mps: float
+    duration_s: float
+    arrest_floor_m: float  # lowest height (above start - …) reached if the sink is arrested anywhere
+    guard_margin_min_mps: float
+    guard_margin_t_s: float
+
+
+def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: float) -> TrajectoryStats:
+    df = traj.df
+    n, e, d = (df[c].to_numpy(float) for c in ("n_m", "e_m", "d_m"))
+    vn, ve, vd = (df[c].to_numpy(float) for c in ("vn_mps", "ve_mps", "vd_mps"))
+    an, ae, ad = (df[c].to_numpy(float) for c in ("an_mps2", "ae_mps2", "ad_mps2"))
+    # stopping a sink vd at arrest_accel costs vd²/2a of height below where it starts
+    stop = np.where(vd > 0, vd * vd / (2.0 * arrest_accel_mps2), 0.0)
+    if traj.has_attitude():
+        q = traj.attitude_quat()
+        _, _, _, margin = region.check(vn, ve, vd, q[:, 0], q[:, 1], q[:, 2], q[:, 3])
+        margin = np.asarray(margin, float)
+    else:  # attitude from the commanded acceleration (thrust along −z_body), as the guard predicts
+        wu = [predicted_blade_velocity_mps(a, b, c, 0, 0, 0, x, y, z, 0.0)
+              for a, b, c, x, y, z in zip(vn, ve, vd, an, ae, ad)]  # fmt: skip
+        w, u = np.array(wu).T
+        margin = np.asarray(region.margin(w, u), float)
+    i = int(np.argmin(margin))
+    return TrajectoryStats(
+        depth_max_m=float(d.max()),
+        radius_max_m=float(np.hypot(n, e).max()),
+        descent_max_mps=float(vd.max()),
+        speed_max_mps=float(np.sqrt(vn**2 + ve**2 + vd**2).max()),
+        duration_s=traj.duration_s,
+        arrest_floor_m=float((-(d + stop)).min()),
+        guard_margin_min_mps=float(margin[i]),
+        guard_margin_t_s=float(df["t_s"].iloc[i] - df["t_s"].iloc[0]),
+    )
+
+
+def trajectory_checks(
+    stats: TrajectoryStats,
+    profile: VehicleProfile,
+    start_height_m: float,
+    min_alt_m: float,
+    geofence_radius_m: float,
+    recovery_room_m: float = 0.0,
+    observe_region: bool = False,
+) -> list[Check]:
+    checks = [
+        Check("trajectory limits", PASS,
+              f"max speed {stats.speed_max_mps:.2f} m/s, max descent {stats.descent_max_mps:.2f} m/s, "
+              f"{stats.duration_s:.2f} s",
+              f"within '{profile.name}' tilt/speed/thrust limits"),
+    ]  # fmt: skip
+    low = start_height_m - stats.depth_max_m
+    checks.append(Check(
+        "height", PASS if low >= min_alt_m - 1e-6 else FAIL,
+        f"start {start_height_m:.2f} m, lowest point {low:.2f} m",
+        f"lowest point ≥ --min-alt {min_alt_m:g} m",
+    ))  # fmt: skip
+    arrest_low = start_height_m + stats.arrest_floor_m
+    checks.append(Check(
+        "height to arrest the sink", PASS if arrest_low >= min_alt_m - 1e-6 else FAIL,
+        f"an abort anywhere bottoms out at {arrest_low:.2f} m",
+        f"≥ --min-alt {min_alt_m:g} m",
+    ))  # fmt: skip
+    room = stats.radius_max_m + recovery_room_m
+    checks.append(Check(
+        "horizontal room", PASS if room <= geofence_radius_m else FAIL,
+        f"{stats.radius_max_m:.2f} m from start + {recovery_room_m:.2f} m recovery",
+        f"≤ geofence radius {geofence_radius_m:g} m",
+    ))  # fmt: skip
+    if stats.guard_margin_min_mps < 0:
+        status, value = (
+            WARN,
+            f"plan enters the guard region at t={stats.guard_margin_t_s:.2f} s "
+            f"(margin {stats.guard_margin_min_mps:.2f} m/s)"
+            + ("; observed only (probe)" if observe_region else ": the guard will abort"),
+        )
+    else:
+        status, value = PASS, f"min margin {stats.guard_margin_min_mps:.2f} m/s"
+    checks.append(Check("plan vs guard region", status, value, "margin ≥ 0 along the plan"))
+    return checks
+
+
+# -- vehicle -------------------------------------------------------------------------------------------
+
+
+def vehicle_checks(
+    st: TelemetryState, now_s: float, telemetry_hz: float, min_battery_percent: float
+) -> list[Check]:
+    out = []
+    need = 0.8 * telemetry_hz
+    rates = {s: st.rate_hz(s, now_s) for s in ("posvel", "attitude")}
+    ok = st.connected and all(r >= need for r in rates.values())
+    out.append(Check(
+        "link and telemetry rate", PASS if ok else FAIL,
+        f"{'connected' if st.connected else 'DISCONNECTED'}, position-velocity {rates['posvel']:.0f} Hz, "
+        f"attitude {rates['attitude']:.0f} Hz",
+        f"connected, ≥ {need:.0f} Hz",
+    ))  # fmt: skip
+    bad = sorted(k.removeprefix("is_") for k, v in st.health.items() if not v)
+    out.append(Check(
+        "health", PASS if st.health and not bad else FAIL,
+        "all ok" if st.health and not bad else (", ".join(bad) + " not ok" if bad else "not reported"),
+        "every sensor and estimate ok, armable",
+    ))  # fmt: skip
+    est_ok = (st.health.get("is_local_position_ok", False) and st.health.get("is_home_position_ok", False)
+              and all(math.isfinite(x) for x in (st.n_m, st.e_m, st.d_m, st.vn_mps, st.ve_mps, st.vd_mps))
+              and all(math.isfinite(x) for x in st.q))  # fmt: skip
+    out.append(Check(
+        "estimator", PASS if est_ok else FAIL,
+        f"local position ({st.n_m:.2f}, {st.e_m:.2f}, {st.d_m:.2f}) m" if est_ok else "no valid local position",
+        "local position and home valid",
+    ))  # fmt: skip
+    if math.isfinite(st.battery_percent):
+        pct = st.battery_percent * 100.0 if st.battery_percent <= 1.0 else st.battery_percent
+        out.append(Check("battery", PASS if pct >= min_battery_percent else FAIL,
+                         f"{pct:.0f} %, {st.battery_v:.2f} V", f"≥ {min_battery_percent:g} %"))  # fmt: skip
+    else:
+        out.append(Check("battery", WARN, "not reported", f"≥ {min_battery_percent:g} %"))
+    on_ground = not st.armed and st.landed_state in ("ON_GROUND", "UNKNOWN") and not st.in_air
+    out.append(Check("on the ground, disarmed", PASS if on_ground else FAIL,
+                     f"armed={st.armed}, landed state {st.landed_state}", "disarmed on the ground"))  # fmt: skip
+    return out
+
+
+def param_checks(params: dict[str, float | int | None], descent_max_mps: float, w_allow_mps: float) -> list[Check]:
+    out = []
+    t = params.get("COM_OF_LOSS_T")
+    if t is None:
+        out.append(Check("COM_OF_LOSS_T", WARN, "not reported", "≤ 2 s"))
+    else:
+        out.append(Check("COM_OF_LOSS_T", PASS if 0 < t <= 2.0 else FAIL, f"{t:g} s",
+                         "0 < t ≤ 2 s: a dead link leaves offboard quickly"))  # fmt: skip
+    a = params.get("COM_OBL_RC_ACT")
+    if a is None:
+        out.append(Check("COM_OBL_RC_ACT", WARN, "not reported", "Position/Altitude/Return/Land/Hold"))
+    else:
+        name = OBL_ACTIONS.get(int(a), f"unknown ({a})")
+        out.append(Check("COM_OBL_RC_ACT", FAIL if int(a) in OBL_UNSAFE or int(a) not in OBL_ACTIONS else PASS,
+                         f"{int(a)} = {name}", "offboard loss → Position/Altitude/Return/Land/Hold"))  # fmt: skip
+    r = params.get("COM_RC_OVERRIDE")
+    if r is None:
+        out.append(Check("COM_RC_OVERRIDE", WARN, "not reported", "offboard bit (2) set"))
+    else:
+        on = bool(int(r) & RC_OVERRIDE_OFFBOARD_BIT)
+        out.append(Check("COM_RC_OVERRIDE", PASS if on else WARN,
+                         f"{int(r)} (offboard override {'on' if on else 'off'})",
+                         "offboard bit (2) set: the pilot's sticks take over"))  # fmt: skip
+    v = params.get("MPC_Z_VEL_MAX_DN")
+    if v is None:
+        out.append(Check("MPC_Z_VEL_MAX_DN", WARN, "not reported", f"≥ planned descent {descent_max_mps:.2f} m/s"))
+    else:
+        ok = v + 1e-6 >= descent_max_mps
+        out.append(Check(
+            "MPC_Z_VEL_MAX_DN", PASS if ok else FAIL, f"{v:g} m/s",
+            f"≥ planned descent {descent_max_mps:.2f} m/s (PX4 clips offboard descents to it)",
+        ))  # fmt: skip
+        if v > w_allow_mps:
+            out.append(Check("PX4 descents after an abort", WARN, f"MPC_Z_VEL_MAX_DN {v:g} m/s",
+                             f"Hold/Return descents stay below w_allow {w_allow_mps:.2f} m/s"))  # fmt: skip
+    return out

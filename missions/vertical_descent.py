@@ -1,0 +1,38 @@
+"""Vertical descent: the baseline, straight down at the vehicle's safe vertical speed.
+
+Cruise at ``w_allow − margin − extra_margin`` (inside the guard's own bound, so it stays silent), accelerating and
+braking within the vehicle's limits. Edit ``vertical_descent.toml`` or copy this file.
+
+    python missions/vertical_descent.py --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
+    flighttest fly vertical --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
+"""
+
+from pathlib import Path
+
+from flighttest.missions_config import MissionConfig
+from flighttest.planner.export import vertical_trajectory
+from flighttest.planner.vertical import plan_vertical
+from flighttest.profiles import VehicleProfile
+from flighttest.trajectory import Trajectory
+
+CONFIG = Path(__file__).with_suffix(".toml")
+
+
+def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
+    p = cfg.plan
+    vp = plan_vertical(
+        profile,
+        height_m=float(p.get("descent_m", 3.0)),
+        # the guard's own bound minus a tracking margin, so the guard stays silent
+        margin_mps=profile.vrs.margin_mps + float(p.get("extra_margin_mps", 0.15)),
+        accel_fraction=float(p.get("accel_fraction", 0.5)),
+    )
+    return vertical_trajectory(vp, profile.name, profile.mass_kg)
+
+
+if __name__ == "__main__":
+    import sys
+
+    from flighttest.cli.fly import mission_main
+
+    sys.exit(mission_main("vertical", sys.modules[__name__]))

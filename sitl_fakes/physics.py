@@ -1,0 +1,161 @@
+"""Rigid-body quadcopter: quaternion attitude, four rotor thrusts with motor lag, drag, ground contact.
+
+Plain-float arithmetic on purpose: at 250 Hz a 3-vector through numpy costs more than the maths.
+Frames as in NOTES §1: NED inertial, FRD body, ``q = (w, x, y, z)`` rotates body → NED.
+Rotor order and spin follow PX4's quad-X: 1 front-right CCW, 2 rear-left CCW, 3 front-left CW,
+4 rear-right CW. A CCW rotor's drag torque yaws the body clockwise (+yaw in FRD).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from flighttest.aero import G_MPS2
+from flighttest.profiles import VehicleProfile
+
+MOTOR_TIME_CONSTANT_S = 0.03
+# rotor i: (x sign, y sign, spin sign: +1 CCW)
+ROTOR_LAYOUT = ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0))
+
+
+def rotate_body_to_ned(qw, qx, qy, qz, bx, by, bz):
+    """``R(q) v_b`` for one vector, plain floats."""
+    tx = 2.0 * (qy * bz - qz * by)
+    ty = 2.0 * (qz * bx - qx * bz)
+    tz = 2.0 * (qx * by - qy * bx)
+    return (
+        bx + qw * tx + (qy * tz - qz * ty),
+        by + qw * ty + (qz * tx - qx * tz),
+        bz + qw * tz + (qx * ty - qy * tx),
+    )
+
+
+def rotate_ned_to_body(qw, qx, qy, qz, vn, ve, vd):
+    """``R(q)ᵀ v_ned`` for one vector, plain floats."""
+    return rotate_body_to_ned(qw, -qx, -qy, -qz, vn, ve, vd)
+
+
+@dataclass
+class RigidBodyState:
+    n_m: float = 0.0
+    e_m: float = 0.0
+    d_m: float = 0.0
+    vn_mps: float = 0.0
+    ve_mps: float = 0.0
+    vd_mps: float = 0.0
+    qw: float = 1.0
+    qx: float = 0.0
+    qy: float = 0.0
+    qz: float = 0.0
+    p_radps: float = 0.0  # body rates FRD
+    q_radps: float = 0.0
+    r_radps: float = 0.0
+    an_mps2: float = 0.0  # last NED acceleration (for the IMU)
+    ae_mps2: float = 0.0
+    ad_mps2: float = 0.0
+    thrust_n: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 0.0])  # actual rotor thrusts
+    on_ground: bool = True
+
+    def yaw_rad(self) -> float:
+        return math.atan2(2.0 * (self.qw * self.qz + self.qx * self.qy), 1.0 - 2.0 * (self.qy**2 + self.qz**2))
+
+    def tilt_rad(self) -> float:
+        """Angle between body z and NED down."""
+        c = 1.0 - 2.0 * (self.qx * self.qx + self.qy * self.qy)
+        return math.acos(max(-1.0, min(1.0, c)))
+
+
+class QuadBody:
+    """Integrates the rigid body from commanded rotor thrusts and per-rotor thrust factors."""
+
+    def __init__(self, profile: VehicleProfile):
+        self.profile = profile
+        self.mass_kg = profile.mass_kg
+        self.ixx, self.iyy, self.izz = profile.inertia_kgm2
+        self.arm_xy_m = profile.arm_length_m / math.sqrt(2.0)
+        self.k_yaw_m = profile.yaw_moment_per_thrust_m
+        self.max_thrust_n = profile.max_thrust_per_rotor_n
+        # quadratic drag that balances the weight at max tilt and max speed: a profile-consistent guess
+        self.drag_coeff_kgpm = (
+            profile.mass_kg * G_MPS2 * math.tan(math.radians(profile.max_tilt_deg)) / profile.max_speed_mps**2
+        )
+        self.state = RigidBodyState()
+
+    def step(self, dt_s, thrust_cmd_n, thrust_factor, wind_ned) -> float:
+        """Advance by ``dt_s``; returns the downward speed at ground contact (0 if none this step)."""
+        s = self.state
+        alpha = dt_s / (MOTOR_TIME_CONSTANT_S + dt_s)
+        thrusts = s.thrust_n
+        for i in range(4):
+            thrusts[i] += alpha * (thrust_cmd_n[i] * thrust_factor[i] - thrusts[i])
+            if thrusts[i] < 0.0:
+                thrusts[i] = 0.0
+        t1, t2, t3, t4 = thrusts
+        a = self.arm_xy_m
+        mx = -a * (t1 - t2 - t3 + t4)
+        my = a * (t1 - t2 + t3 - t4)
+        mz = self.k_yaw_m * (t1 + t2 - t3 - t4)
+        total = t1 + t2 + t3 + t4
+
+        qw, qx, qy, qz = s.qw, s.qx, s.qy, s.qz
+        fn, fe, fd = rotate_body_to_ned(qw, qx, qy, qz, 0.0, 0.0, -total)
+        van, vae, vad = s.vn_mps - wind_ned[0], s.ve_mps - wind_ned[1], s.vd_mps - wind_ned[2]
+        vair = math.sqrt(van * van + vae * vae + vad * vad)
+        c = self.drag_coeff_kgpm * vair
+        m = self.mass_kg
+        an = (fn - c * van) / m
+        ae = (fe - c * vae) / m
+        ad = (fd - c * vad) / m + G_MPS2
+
+        # Euler's equations, body frame
+        p, q, r = s.p_radps, s.q_radps, s.r_radps
+        pd = (mx - (self.izz - self.iyy) * q * r) / self.ixx
+        qd = (my - (self.ixx - self.izz) * p * r) / self.iyy
+        rd = (mz - (self.iyy - self.ixx) * p * q) / self.izz
+
+        contact_speed = 0.0
+        if s.on_ground:
+            # resting on the ground: only lift-off moves it
+            if ad < 0.0:
+                s.on_ground = False
+            else:
+                an = ae = ad = 0.0
+                s.vn_mps = s.ve_mps = s.vd_mps = 0.0
+                s.p_radps = s.q_radps = s.r_radps = 0.0
+                s.an_mps2 = s.ae_mps2 = s.ad_mps2 = 0.0
+                self._level(keep_yaw=True)
+                return 0.0
+
+        s.vn_mps += an * dt_s
+        s.ve_mps += ae * dt_s
+        s.vd_mps += ad * dt_s
+        s.n_m += s.vn_mps * dt_s
+        s.e_m += s.ve_mps * dt_s
+        s.d_m += s.vd_mps * dt_s
+        s.an_mps2, s.ae_mps2, s.ad_mps2 = an, ae, ad
+        p += pd * dt_s
+        q += qd * dt_s
+        r += rd * dt_s
+        s.p_radps, s.q_radps, s.r_radps = p, q, r
+        # q̇ = ½ q ⊗ (0, ω)
+        h = 0.5 * dt_s
+        nw = qw + h * (-qx * p - qy * q - qz * r)
+        nx = qx + h * (qw * p + qy * r - qz * q)
+        ny = qy + h * (qw * q - qx * r + qz * p)
+        nz = qz + h * (qw * r + qx * q - qy * p)
+        inv = 1.0 / math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+        s.qw, s.qx, s.qy, s.qz = nw * inv, nx * inv, ny * inv, nz * inv
+
+        if s.d_m >= 0.0:  # ground plane at the home altitude
+            contact_speed = max(s.vd_mps, 1e-6)
+            s.d_m = 0.0
+            s.on_ground = True
+            s.vn_mps = s.ve_mps = s.vd_mps = 0.0
+            s.p_radps = s.q_radps = s.r_radps = 0.0
+        return contact_speed
+
+    def _level(self, keep_yaw: bool) -> None:
+        s = self.state
+        yaw = s.yaw_rad() if keep_yaw else 0.0
+        s.qw, s.qx, s.qy, s.qz = math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw)

@@ -1,0 +1,89 @@
+"""Analysis of logs produced by really flying the fake (MAVSDK + pymavlink), against its truth log."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from flighttest.analysis.loaders import load_log
+from flighttest.analysis.pipeline import analyse
+from flighttest.analysis.segment import find_descents
+from flighttest.cli.analysis import primary_descent
+from flighttest.profiles import load_profile
+
+pytestmark = pytest.mark.flight
+
+
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
+
+
+def fly(mission: str, fake, tmp_path) -> Path:
+    """Fly the mission's own config, with a stale-telemetry limit that a busy 2-core CI box meets."""
+    cfg = tmp_path / f"{mission}.toml"
+    text = (MISSIONS / f"{mission}_descent.toml").read_text()
+    cfg.write_text(re.sub(r"stale_periods\s*=\s*[0-9.]+", "stale_periods = 10.0", text))
+    root = tmp_path / "logs"
+    cmd = [sys.executable, "-m", "flighttest", "fly", mission, "--config", str(cfg), "--connect", fake.url]
+    cmd += ["--vehicle", "x500", "--yes", "--log-dir", str(root)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=150)
+    folders = sorted(root.glob(f"*-{mission}"))
+    assert folders, proc.stdout[-2000:] + proc.stderr[-2000:]
+    summary = json.loads((folders[-1] / "summary.json").read_text())
+    assert summary["outcome"] == "completed", summary
+    return folders[-1]
+
+
+def truth_state(truth_csv, unix0: float) -> pd.DataFrame:
+    """The fake's true trajectory on the analysed log's clock (via the shared wall clock)."""
+    tr = pd.read_csv(truth_csv, low_memory=False)
+    st = tr[tr["kind"] == "state"]
+    df = pd.DataFrame(
+        {
+            "t_s": st["unix_s"].to_numpy(float) - unix0,
+            "n_m": st["n_m"].to_numpy(float),
+            "e_m": st["e_m"].to_numpy(float),
+            "d_m": st["d_m"].to_numpy(float),
+            "vd_mps": st["vd_mps"].to_numpy(float),
+            "w_mps": st["w_mps"].to_numpy(float),
+            "u_mps": st["u_mps"].to_numpy(float),
+        }
+    )
+    return df[df["t_s"] >= 0].reset_index(drop=True)
+
+
+@pytest.mark.parametrize("mission", ["vertical", "helix"])
+def test_flown_log_matches_truth(fake_vehicle_factory, tmp_path, mission):
+    fake = fake_vehicle_factory("x500")
+    folder = fly(mission, fake, tmp_path)
+    fake.stop()
+    a = analyse(load_log(folder))  # the vehicle comes from meta.json
+    assert a.profile is not None and a.profile.name == "x500"
+    main = primary_descent(a.descents)
+    assert main is not None and main["mission"] == mission and main["phase"] == "stream"
+
+    truth = truth_state(fake.truth_log, float(a.log.state["unix_s"].iloc[0]))
+    t_desc, _ = find_descents(truth)
+    # the same descent in the truth: the one that overlaps ours
+    tm = t_desc.iloc[(t_desc["start_s"] - main["start_s"]).abs().argmin()]
+    assert main["start_s"] == pytest.approx(tm["start_s"], abs=0.06)
+    assert main["duration_s"] == pytest.approx(tm["duration_s"], abs=0.08)
+    assert main["height_m"] == pytest.approx(tm["height_m"], abs=0.03)
+    assert main["max_rate_mps"] == pytest.approx(tm["max_rate_mps"], abs=0.05)
+    assert main["horizontal_excursion_m"] == pytest.approx(tm["horizontal_excursion_m"], abs=0.1)
+
+    # exposure: the truth's own blade-frame w, u through the same guard region
+    region = load_profile("x500").guard_region()
+    m = np.asarray(region.margin(truth["w_mps"].to_numpy(), truth["u_mps"].to_numpy()))
+    t = truth["t_s"].to_numpy()
+    sel = (t >= main["start_s"]) & (t <= main["end_s"])
+    dt = np.diff(t, append=t[-1])
+    assert main["time_inside_s"] == pytest.approx(dt[sel & (m < 0)].sum(), abs=0.1)
+    assert main["time_near_s"] == pytest.approx(dt[sel & (m >= 0) & (m < 0.3)].sum(), abs=0.15)
+    assert main["min_margin_mps"] == pytest.approx(m[sel].min(), abs=0.03)

@@ -1,0 +1,325 @@
+"""``flighttest fly`` end to end against the fake vehicle: real UDP MAVLink, real MAVSDK, the CLI as
+a subprocess. Faults (stale telemetry, offboard dropped, dead link) are injected by a MAVLink-aware
+UDP relay between flighttest and the fake, switched on once the flight log shows the descent."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from flighttest.planner.export import vertical_trajectory
+from flighttest.planner.vertical import plan_vertical
+from flighttest.profiles import load_profile
+
+pytestmark = pytest.mark.flight
+
+LOCAL_POSITION_NED = 32
+SET_POSITION_TARGET_LOCAL_NED = 84
+FLY_TIMEOUT_S = 120
+
+
+def _msgid(frame: bytes) -> int:
+    if frame[:1] == b"\xfd" and len(frame) >= 10:
+        return int.from_bytes(frame[7:10], "little")
+    if frame[:1] == b"\xfe" and len(frame) >= 6:
+        return frame[5]
+    return -1
+
+
+class Relay:
+    """flighttest ⇄ relay ⇄ fake over UDP. ``mode``: "pass", "drop_state" (vehicle → GCS
+    LOCAL_POSITION_NED), "drop_setpoints" (GCS → vehicle offboard setpoints), "dead" (nothing)."""
+
+    def __init__(self, fake_port: int) -> None:
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.front.bind(("127.0.0.1", 0))
+        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.back.bind(("127.0.0.1", 0))
+        for s in (self.front, self.back):
+            s.settimeout(0.1)
+        self.fake = ("127.0.0.1", fake_port)
+        self.gcs: tuple[str, int] | None = None
+        self.mode = "pass"
+        self.dropped = 0
+        self._stop = threading.Event()
+        self._threads = [threading.Thread(target=f, daemon=True) for f in (self._up, self._down)]
+        for t in self._threads:
+            t.start()
+
+    @property
+    def url(self) -> str:
+        return f"udpout://127.0.0.1:{self.front.getsockname()[1]}"
+
+    def _up(self) -> None:  # flighttest → fake
+        while not self._stop.is_set():
+            try:
+                data, addr = self.front.recvfrom(65535)
+            except (TimeoutError, OSError):
+                continue
+            self.gcs = addr
+            if self.mode == "dead" or (self.mode == "drop_setpoints" and _msgid(data) == SET_POSITION_TARGET_LOCAL_NED):
+                self.dropped += 1
+                continue
+            self.back.sendto(data, self.fake)
+
+    def _down(self) -> None:  # fake → flighttest
+        while not self._stop.is_set():
+            try:
+                data, _ = self.back.recvfrom(65535)
+            except (TimeoutError, OSError):
+                continue
+            if self.gcs is None:
+                continue
+            if self.mode == "dead" or (self.mode == "drop_state" and _msgid(data) == LOCAL_POSITION_NED):
+                self.dropped += 1
+                continue
+            self.front.sendto(data, self.gcs)
+
+    def close(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(1.0)
+        self.front.close()
+        self.back.close()
+
+
+def fly_cmd(target: str, url: str, log_dir: Path, *extra: str, yes: bool = True) -> list[str]:
+    return [sys.executable, "-m", "flighttest", "fly", target, "--connect", url, "--vehicle", "x500",
+            "--log-dir", str(log_dir), "--json", *(["--yes"] if yes else []), *extra]  # fmt: skip
+
+
+def run_fly(*args, **kw) -> tuple[int, dict, str]:
+    p = subprocess.run(fly_cmd(*args, **kw), capture_output=True, text=True, timeout=FLY_TIMEOUT_S,
+                       stdin=subprocess.DEVNULL)  # fmt: skip
+    try:
+        summary = json.loads(p.stdout)
+    except json.JSONDecodeError:
+        summary = {}
+    return p.returncode, summary, p.stderr
+
+
+def start_fly(*args) -> subprocess.Popen:
+    return subprocess.Popen(fly_cmd(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL)  # fmt: skip
+
+
+def wait_for_event(log_dir: Path, event: str, proc: subprocess.Popen, timeout_s: float = 60.0) -> dict:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        for f in log_dir.glob("*/events.jsonl"):
+            for line in f.read_text().splitlines():
+                rec = json.loads(line)
+                if rec["event"] == event:
+                    return rec
+        if proc.poll() is not None:
+            raise AssertionError(f"flighttest ended before '{event}': {proc.stderr.read()}")
+        time.sleep(0.05)
+    raise AssertionError(f"no '{event}' event within {timeout_s} s")
+
+
+def finish(proc: subprocess.Popen) -> tuple[int, dict, str]:
+    out, err = proc.communicate(timeout=FLY_TIMEOUT_S)
+    return proc.returncode, json.loads(out), err
+
+
+def events(log_dir: str) -> list[dict]:
+    return [json.loads(x) for x in (Path(log_dir) / "events.jsonl").read_text().splitlines()]
+
+
+def assert_complete_log(log_dir: str) -> None:
+    d = Path(log_dir)
+    for name in ("meta.json", "flight.tlog", "setpoints.csv", "guard.csv", "events.jsonl", "preflight.json",
+                 "trajectory.csv", "trajectory.json", "summary.json"):  # fmt: skip
+        assert (d / name).is_file(), name
+    assert len(pd.read_csv(d / "setpoints.csv")) > 50
+    assert len(pd.read_csv(d / "guard.csv")) > 50
+    from pymavlink import mavutil
+
+    mlog = mavutil.mavlink_connection(str(d / "flight.tlog"))
+    types = set()
+    while (m := mlog.recv_match()) is not None:
+        types.add(m.get_type())
+    assert {"HEARTBEAT", "LOCAL_POSITION_NED", "ATTITUDE_QUATERNION"} <= types
+
+
+def truth(fake) -> pd.DataFrame:
+    fake.stop()
+    return pd.read_csv(fake.truth_log, low_memory=False)
+
+
+def assert_safe_end(tr: pd.DataFrame, modes=("HOLD", "LAND")) -> None:
+    assert not (tr["kind"] == "crash").any()
+    last = tr[tr["kind"] == "state"].iloc[-1]
+    assert last["mode"] in modes or last["armed"] == 0
+
+
+def stream_window(log_dir: str) -> tuple[float, float]:
+    ev = events(log_dir)
+    t0 = next(e["t_s"] for e in ev if e["event"] == "stream_start")
+    t1 = next(e["t_s"] for e in ev if e["event"] == "stream_end")
+    return t0, t1
+
+
+# -- nominal flights ---------------------------------------------------------------------------------
+
+
+def test_vertical_mission_lands_at_the_planned_point_with_the_guard_silent(fake_vehicle_factory, tmp_path):
+    fake = fake_vehicle_factory("x500")
+    rc, s, err = run_fly("vertical", fake.url, tmp_path, "--height", "5")
+    assert rc == 0, err
+    assert s["outcome"] == "completed" and s["abort_reason"] is None
+    assert 3.0 < s["descent_time_s"] < 10.0
+    assert s["setpoint_rate_hz"] == pytest.approx(50.0, rel=0.05)
+    assert_complete_log(s["log_dir"])
+    g = pd.read_csv(Path(s["log_dir"]) / "guard.csv")
+    t0, t1 = stream_window(s["log_dir"])
+    during = g[(g.t_s >= t0) & (g.t_s <= t1)]
+    assert len(during) > 100 and (during.verdict == "ok").all() and (g.action != "abort").all()
+    tr = truth(fake)
+    st = tr[tr["kind"] == "state"]
+    last = st.iloc[-1]
+    assert last["armed"] == 0 and abs(last["d_m"]) < 0.05
+    # the descent started where the vehicle hovered at the start point: straight down, no drift
+    origin = next(e for e in events(s["log_dir"]) if e["event"] == "stream_start")["origin_ned"]
+    assert abs(last["n_m"] - origin[0]) < 0.3 and abs(last["e_m"] - origin[1]) < 0.3
+    assert (st["depth_n"] <= 0).all()
+    assert not (tr["kind"] == "crash").any()
+
+
+# -- the guard ---------------------------------------------------------------------------------------
+
+
+def test_bad_trajectory_is_aborted_by_the_guard_before_the_vrs_bites(fake_vehicle_factory, tmp_path):
+    prof = load_profile("x500")
+    plan = plan_vertical(prof, height_m=2.5, w_allow_mps=2 * prof.w_allow_mps, margin_mps=0.0, accel_fraction=0.5)
+    bad = tmp_path / "bad_vertical"
+    vertical_trajectory(plan, "x500", prof.mass_kg).save(bad)
+    fake = fake_vehicle_factory("x500", param={"MPC_Z_VEL_MAX_DN": 3.0})
+    rc, s, err = run_fly(str(bad) + ".csv", fake.url, tmp_path, "--height", "5")
+    assert rc == 1, err
+    assert s["outcome"] == "aborted" and s["abort_verdict"] in ("violation", "predicted", "marginal")
+    assert s["final_mode"] in ("HOLD", "LAND")
+    assert [r["rung"] for r in s["ladder"]][:2] == ["RECOVER", "HOLD"]
+    assert_complete_log(s["log_dir"])
+    tr = truth(fake)
+    st = tr[tr["kind"] == "state"]
+    # the vehicle never got deep enough into the true VRS to feel it
+    assert st["dT_T"].abs().max() < 0.05
+    assert st["depth_n"].max() < 0.05
+    assert_safe_end(tr)
+    # the descent was commanded, and the last setpoint the vehicle got arrests the sink (vd ≤ 0)
+    vd_sp = pd.to_numeric(tr.loc[tr["kind"] == "setpoint", "sp_vd_mps"], errors="coerce")
+    assert vd_sp.max() > 0.1 and vd_sp.dropna().iloc[-1] <= 0
+
+
+# -- faults ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("fault", "verdict_or_reason"),
+    [("drop_state", "no telemetry"), ("drop_setpoints", "left offboard"), ("dead", "no telemetry")],
+)
+def test_faults_mid_descent_end_safe_with_a_complete_log(fake_vehicle_factory, tmp_path, fault, verdict_or_reason):
+    fake = fake_vehicle_factory("x500")
+    relay = Relay(fake.port)
+    try:
+        proc = start_fly("vertical", relay.url, tmp_path, "--height", "5")
+        wait_for_event(tmp_path, "stream_start", proc)
+        time.sleep(0.5)
+        relay.mode = fault
+        rc, s, err = finish(proc)
+    finally:
+        relay.close()
+    assert rc == 1, err
+    assert s["outcome"] == "aborted" and verdict_or_reason in s["abort_reason"]
+    assert s["phase_at_end"] == "stream"
+    assert_complete_log(s["log_dir"])
+    tr = truth(fake)
+    assert_safe_end(tr)
+    if fault == "dead":
+        # our commands never arrived: the vehicle's own offboard-loss failsafe took it to Hold
+        assert (tr["kind"] == "failsafe").any()
+    else:
+        assert tr[tr["kind"] == "state"].iloc[-1]["armed"] == 0  # landed by the ladder
+
+
+def test_sigint_mid_descent_runs_the_ladder(fake_vehicle_factory, tmp_path):
+    fake = fake_vehicle_factory("x500")
+    proc = start_fly("vertical", fake.url, tmp_path, "--height", "5")
+    wait_for_event(tmp_path, "stream_start", proc)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    rc, s, err = finish(proc)
+    assert rc == 1 and "SIGINT" in s["abort_reason"]
+    assert_complete_log(s["log_dir"])
+    assert [r["rung"] for r in s["ladder"]][-1] == "DONE"
+    tr = truth(fake)
+    assert_safe_end(tr)
+    assert tr[tr["kind"] == "state"].iloc[-1]["armed"] == 0
+
+
+# -- refusals ----------------------------------------------------------------------------------------
+
+
+def test_preflight_refuses_a_trajectory_that_needs_more_height(fake_vehicle_factory, tmp_path):
+    fake = fake_vehicle_factory("x500")
+    rc, s, err = run_fly("vertical", fake.url, tmp_path, "--height", "3", "--min-alt", "1")
+    assert rc == 2
+    assert "preflight failed: height" in err and "Traceback" not in err
+    assert s["outcome"] == "refused"
+    pre = json.loads((Path(s["log_dir"]) / "preflight.json").read_text())
+    assert not pre["ok"] and any(c["name"] == "height" and c["status"] == "fail" for c in pre["checks"])
+    tr = truth(fake)
+    assert not ((tr["kind"] == "command") & tr["detail"].astype(str).str.contains("ARM")).any()
+    assert (tr[tr["kind"] == "state"]["armed"] == 0).all()
+
+
+def test_without_a_terminal_and_without_yes_it_refuses_to_arm(fake_vehicle_factory, tmp_path):
+    fake = fake_vehicle_factory("x500")
+    rc, s, err = run_fly("vertical", fake.url, tmp_path, yes=False)
+    assert rc == 2 and "--yes" in err
+    tr = truth(fake)
+    assert (tr[tr["kind"] == "state"]["armed"] == 0).all()
+
+
+def _free_udp_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def test_two_autopilots_without_sysid_are_refused(fake_vehicle_factory, tmp_path):
+    port = _free_udp_port()
+    for sysid in (1, 2):
+        fake_vehicle_factory("x500", peer=[f"127.0.0.1:{port}"], sysid=sysid)
+    url = f"udpin://0.0.0.0:{port}"
+    rc, s, err = run_fly("vertical", url, tmp_path)
+    assert rc == 2 and "2 autopilots" in err and "--sysid" in err
+    rc, s, err = run_fly("vertical", url, tmp_path, "--dry-run", "--sysid", "2")
+    assert rc == 0, err
+    assert s["outcome"] == "dry_run"
+    link = next(e for e in events(s["log_dir"]) if e["event"] == "link")
+    assert link["sysid"] == 2 and link["autopilots"] == [1, 2]
+
+
+def test_bad_input_is_one_line_exit_2(tmp_path):
+    env = dict(os.environ)
+    for args in (["vertical", "--connect", "bogus://x", "--vehicle", "x500"],
+                 ["vertical", "--connect", "udpout://127.0.0.1:1", "--vehicle", "nope"],
+                 [str(tmp_path / "missing.csv"), "--connect", "udpout://127.0.0.1:1", "--vehicle", "x500"]):
+        p = subprocess.run([sys.executable, "-m", "flighttest", "fly", *args], capture_output=True, text=True,
+                           timeout=60, env=env)  # fmt: skip
+        assert p.returncode == 2, p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
