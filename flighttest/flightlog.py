@@ -1,8 +1,11 @@
 """One folder per flight (docs/CONTRACTS.md "Flight log folders"), written as the vehicle flies.
 
-Rows go to open CSV / JSONL files and are flushed to the OS at least every ``FLUSH_EVERY_S``, so a
-process killed mid-flight (even with SIGKILL) loses at most that much: every line that reached the
-file is complete, and the analysis tools read what is there. ``summary.json`` is written last; its
+Rows go to open CSV / JSONL files, line-buffered: each row reaches the OS as one whole line the
+moment it is written (a block buffer would hand the OS half a line whenever it fills, and a killed
+process would leave that half). A process killed mid-flight, even with SIGKILL, so loses nothing it
+wrote, every line in the files is complete, and the analysis tools read what is there.
+``flush()`` is kept for callers that want to be explicit; ``FLUSH_EVERY_S`` bounds it anyway.
+``summary.json`` is written last; its
 absence marks a flight that did not end cleanly.
 """
 
@@ -84,7 +87,7 @@ class FlightLog:
         return self.dir / "flight.tlog"
 
     def _open(self, name: str) -> IO[str]:
-        f = open(self.dir / name, "w", encoding="utf-8", newline="")  # noqa: SIM115 (kept open)
+        f = open(self.dir / name, "w", encoding="utf-8", newline="", buffering=1)  # noqa: SIM115 (kept open)
         self._files.append(f)
         return f
 

@@ -50,14 +50,24 @@ class GuardLimits:
     min_alt_m: float | None = None
     max_descent_mps: float | None = None
     fluct_window_s: float = 0.5
+    # fluctuation (the probe's onset detector): absolute limits, and/or a ratio to the hover
+    # baseline the runner measures before streaming (never below the minimum std: a still
+    # simulator hovers with no shake at all, and any ratio of zero is zero)
     max_rate_std_dps: float | None = None
     max_accel_std_mps2: float | None = None
+    fluct_ratio: float | None = None
+    fluct_min_rate_std_dps: float = 0.0
+    fluct_min_accel_std_mps2: float = 0.0
 
     def __post_init__(self) -> None:
         if not (self.telemetry_period_s > 0 and self.stale_periods > 0 and self.horizon_s >= 0):
             raise ValueError("telemetry period, stale periods must be > 0 and horizon ≥ 0")
         if self.debounce_samples < 1 or self.clear_violation_mps < 0 or self.fluct_window_s <= 0:
             raise ValueError("debounce_samples ≥ 1, clear_violation_mps ≥ 0, fluct_window_s > 0")
+        if (self.fluct_ratio is not None and not self.fluct_ratio > 0) or min(
+            self.fluct_min_rate_std_dps, self.fluct_min_accel_std_mps2
+        ) < 0:
+            raise ValueError("fluct_ratio > 0 and the minimum fluctuation stds ≥ 0")
 
     @property
     def stale_after_s(self) -> float:
@@ -126,39 +136,48 @@ def predicted_blade_velocity_mps(
 
 
 class FluctuationDetector:
-    """Standard deviation of a signal over a sliding time window (the probe's onset detector).
+    """Standard deviation of a signal about its linear trend over a sliding time window.
 
-    Fluctuation, not level: a steady turn or steady deceleration does not count, the shaking the
-    VRS brings does. O(1) per sample with running sums.
+    Fluctuation, not level and not the manoeuvre: a steady turn, a steady deceleration or the
+    probe's slow sweep of the commanded acceleration (a trend across the window) do not count,
+    the shaking the VRS brings does. The window holds a few tens of samples: recomputing the
+    least-squares line on each sample costs microseconds and has none of the cancellation a
+    running sum of ``t²`` suffers on a monotonic clock.
     """
 
     def __init__(self, window_s: float) -> None:
         self.window_s = window_s
         self._buf: deque[tuple[float, float]] = deque()
-        self._sum = 0.0
-        self._sum2 = 0.0
 
     def add(self, t_s: float, value: float) -> float:
         if not math.isfinite(value):
             return math.nan
         self._buf.append((t_s, value))
-        self._sum += value
-        self._sum2 += value * value
         while self._buf and self._buf[0][0] < t_s - self.window_s:
-            _, old = self._buf.popleft()
-            self._sum -= old
-            self._sum2 -= old * old
+            self._buf.popleft()
         return self.std()
 
     def std(self) -> float:
         n = len(self._buf)
         if n < 5:
             return 0.0
+        t0, t1 = self._buf[0][0], self._buf[-1][0]
         # a window spanning less than half its length is not yet a window
-        if self._buf[-1][0] - self._buf[0][0] < 0.5 * self.window_s:
+        if t1 - t0 < 0.5 * self.window_s:
             return 0.0
-        mean = self._sum / n
-        return math.sqrt(max(self._sum2 / n - mean * mean, 0.0))
+        mt = sum(t for t, _ in self._buf) / n - t0
+        mx = sum(x for _, x in self._buf) / n
+        stt = sxt = sxx = 0.0
+        for t, x in self._buf:
+            dt, dx = t - t0 - mt, x - mx
+            stt += dt * dt
+            sxt += dt * dx
+            sxx += dx * dx
+        resid = sxx - (sxt * sxt / stt if stt > 0 else 0.0)
+        return math.sqrt(max(resid, 0.0) / n)
+
+
+VELOCITY_STALE_FACTOR = 2.0
 
 
 class Guard:
@@ -166,40 +185,82 @@ class Guard:
 
     def __init__(self, limits: GuardLimits) -> None:
         self.limits = limits
-        self.last_sample_t: float | None = None
+        self.last_sample_t: float | None = None  # newest state sample of any stream (staleness)
+        self.last_velocity_t: float | None = None  # newest position-velocity sample
         self._suspect_run = 0
         self._rate_std = [FluctuationDetector(limits.fluct_window_s) for _ in range(3)]
         self._accel_std = FluctuationDetector(limits.fluct_window_s)
         self.rate_std_dps = 0.0
         self.accel_std_mps2 = 0.0
         self.armed = True  # False: decisions are logged with action "none" (e.g. before streaming)
+        # False: fluctuation is measured but never judged (takeoff, climb, landing shake by design)
+        self.fluct_active = True
+        self.baseline_rate_std_dps: float | None = None
+        self.baseline_accel_std_mps2: float | None = None
+        self._baseline: tuple[list[float], list[float]] | None = None
 
     # -- fluctuation inputs (IMU stream) ---------------------------------------------------------
+    def start_baseline(self) -> None:
+        """Collect the hover's fluctuation from now on (the settle before the probe streams)."""
+        self._baseline = ([], [])
+
+    def freeze_baseline(self) -> tuple[float | None, float | None]:
+        """The hover baseline: median window std since ``start_baseline`` (None without samples)."""
+        if self._baseline is not None:
+            rates, accels = self._baseline
+            self.baseline_rate_std_dps = _median(rates)
+            self.baseline_accel_std_mps2 = _median(accels)
+            self._baseline = None
+        return self.baseline_rate_std_dps, self.baseline_accel_std_mps2
+
+    def fluct_thresholds(self) -> tuple[float | None, float | None]:
+        """Angular-rate (deg/s) and vertical-acceleration (m/s²) std that end the probe: the lowest of
+        the absolute limit and ``fluct_ratio`` × baseline (floored); ``None`` = not judged."""
+        lim = self.limits
+        return (
+            _threshold(lim.max_rate_std_dps, lim.fluct_ratio, self.baseline_rate_std_dps, lim.fluct_min_rate_std_dps),
+            _threshold(lim.max_accel_std_mps2, lim.fluct_ratio, self.baseline_accel_std_mps2,
+                       lim.fluct_min_accel_std_mps2),
+        )  # fmt: skip
+
     def on_rates(self, t_s: float, p_rps: float, q_rps: float, r_rps: float) -> Decision | None:
         stds = [d.add(t_s, math.degrees(v)) for d, v in zip(self._rate_std, (p_rps, q_rps, r_rps))]
         self.rate_std_dps = max((s for s in stds if math.isfinite(s)), default=0.0)
-        lim = self.limits.max_rate_std_dps
-        if lim is not None and self.rate_std_dps > lim:
-            return self._fluct(t_s, f"angular-rate std {self.rate_std_dps:.1f} deg/s > {lim:g} deg/s")
+        if self._baseline is not None:
+            self._baseline[0].append(self.rate_std_dps)
+        lim = self.fluct_thresholds()[0]
+        if self.fluct_active and lim is not None and self.rate_std_dps > lim:
+            return self._fluct(t_s, f"angular-rate std {self.rate_std_dps:.1f} deg/s > {lim:.3g} deg/s"
+                               + self._baseline_note(self.baseline_rate_std_dps, "deg/s"))  # fmt: skip
         return None
 
     def on_vertical_accel(self, t_s: float, a_down_mps2: float) -> Decision | None:
         s = self._accel_std.add(t_s, a_down_mps2)
         self.accel_std_mps2 = s if math.isfinite(s) else self.accel_std_mps2
-        lim = self.limits.max_accel_std_mps2
-        if lim is not None and self.accel_std_mps2 > lim:
-            return self._fluct(
-                t_s, f"vertical-acceleration std {self.accel_std_mps2:.2f} m/s² > {lim:g} m/s²"
-            )
+        if self._baseline is not None:
+            self._baseline[1].append(self.accel_std_mps2)
+        lim = self.fluct_thresholds()[1]
+        if self.fluct_active and lim is not None and self.accel_std_mps2 > lim:
+            return self._fluct(t_s, f"vertical-acceleration std {self.accel_std_mps2:.2f} m/s² > {lim:.3g} m/s²"
+                               + self._baseline_note(self.baseline_accel_std_mps2, "m/s²"))  # fmt: skip
         return None
+
+    def _baseline_note(self, base: float | None, unit: str) -> str:
+        return f" (hover baseline {base:.3g} {unit})" if base is not None else ""
 
     def _fluct(self, t_s: float, reason: str) -> Decision:
         return Decision(t_s, FLUCTUATION, ABORT if self.armed else NONE, reason)
 
     # -- state samples ---------------------------------------------------------------------------
+    def note_state_sample(self, t_s: float) -> None:
+        """A state sample of any stream (position-velocity, attitude) arrived at ``t_s``."""
+        if self.last_sample_t is None or t_s > self.last_sample_t:
+            self.last_sample_t = t_s
+
     def on_sample(self, s: GuardSample) -> Decision:
         lim = self.limits
-        self.last_sample_t = s.t_s
+        self.note_state_sample(s.t_s)
+        self.last_velocity_t = s.t_s
         act = ABORT if self.armed else NONE
         values = (s.vn_mps, s.ve_mps, s.vd_mps, s.qw, s.qx, s.qy, s.qz, s.alt_m, s.wn_mps, s.we_mps, s.wd_mps)
         if not all(math.isfinite(v) for v in values):
@@ -258,16 +319,39 @@ class Guard:
         return dec(OK, NONE, "")
 
     def on_tick(self, now_s: float) -> Decision | None:
-        """Stale telemetry: no sample for ``stale_periods`` telemetry periods."""
+        """Stale telemetry: no state sample of any stream for ``stale_periods`` telemetry periods (the
+        streams arrive interleaved, so one late message alone is not a dead link); and, as a second
+        line, no velocity for ``VELOCITY_STALE_FACTOR`` times that (the region cannot be judged
+        without it, even while attitude keeps coming)."""
         if self.last_sample_t is None:
             return None
+        after = self.limits.stale_after_s
         age = now_s - self.last_sample_t
-        if age > self.limits.stale_after_s:
-            return Decision(
-                now_s, STALE, ABORT if self.armed else NONE,
-                f"no telemetry for {age * 1000:.0f} ms (> {self.limits.stale_after_s * 1000:.0f} ms)",
-            )  # fmt: skip
+        if age > after:
+            return Decision(now_s, STALE, ABORT if self.armed else NONE,
+                            f"no telemetry for {age * 1000:.0f} ms (> {after * 1000:.0f} ms)")  # fmt: skip
+        if self.last_velocity_t is not None:
+            v_age = now_s - self.last_velocity_t
+            if v_age > VELOCITY_STALE_FACTOR * after:
+                return Decision(now_s, STALE, ABORT if self.armed else NONE,
+                                f"no position-velocity telemetry for {v_age * 1000:.0f} ms "
+                                f"(> {VELOCITY_STALE_FACTOR * after * 1000:.0f} ms)")  # fmt: skip
         return None
+
+
+def _median(values: list[float]) -> float | None:
+    vals = sorted(v for v in values if math.isfinite(v))
+    if not vals:
+        return None
+    k = len(vals) // 2
+    return vals[k] if len(vals) % 2 else 0.5 * (vals[k - 1] + vals[k])
+
+
+def _threshold(absolute: float | None, ratio: float | None, baseline: float | None, floor: float) -> float | None:
+    candidates = [absolute] if absolute is not None else []
+    if ratio is not None and baseline is not None:
+        candidates.append(max(ratio * baseline, floor))
+    return min(candidates) if candidates else None
 
 
 # -- the abort ladder --------------------------------------------------------------------------------

@@ -108,6 +108,7 @@ class VehicleLink:
         self.discover_s = discover_s
         self.state = TelemetryState()
         self.on_posvel: list[Listener] = []
+        self.on_attitude: list[Listener] = []
         self.on_imu: list[Listener] = []
         self.on_mode: list[Callable[[str, str], None]] = []
         self.on_connection: list[Callable[[bool], None]] = []
@@ -263,6 +264,8 @@ class VehicleLink:
             st.q = (q.w, q.x, q.y, q.z)
             st.t_att = t
             st.count("attitude", t)
+            for cb in self.on_attitude:
+                cb(t)
 
         def imu(m) -> None:
             t = time.monotonic()

@@ -101,10 +101,12 @@ class MissionRunner:
             horizon_s=g.horizon_s, debounce_samples=g.debounce_samples, clear_violation_mps=g.clear_violation_mps,
             observe_region=g.observe_region, min_alt_m=self.fl.min_alt_m, max_descent_mps=g.max_descent_mps,
             fluct_window_s=g.fluct_window_s, max_rate_std_dps=g.max_rate_std_dps,
-            max_accel_std_mps2=g.max_accel_std_mps2,
+            max_accel_std_mps2=g.max_accel_std_mps2, fluct_ratio=g.fluct_ratio,
+            fluct_min_rate_std_dps=g.fluct_min_rate_std_dps, fluct_min_accel_std_mps2=g.fluct_min_accel_std_mps2,
         )  # fmt: skip
         self.guard = gd.Guard(self.limits)
         self.guard.armed = False
+        self.guard.fluct_active = False  # judged only while streaming, against this flight's hover
         self.floor_active = False
         self.traj = req.trajectory.resample(self.fl.rate_hz)
         self.origin: tuple[float, float, float] | None = None
@@ -119,6 +121,7 @@ class MissionRunner:
         self._bg: list[asyncio.Task] = []
         self._signals = 0
         self.first_inside_region_t: float | None = None
+        self.panel = None  # the live panel while flying from a terminal
 
     # -- helpers -------------------------------------------------------------------------------------
     def event(self, name: str, **fields: Any) -> None:
@@ -206,6 +209,12 @@ class MissionRunner:
         while True:
             await asyncio.sleep(period)
             d = self.guard.on_tick(time.monotonic())
+            if d is not None:
+                # samples MAVSDK already handed over wait in the subscription queues until their
+                # tasks run: let them run (a busy loop wakes this timer first), then judge again
+                for _ in range(3):
+                    await asyncio.sleep(0)
+                d = self.guard.on_tick(time.monotonic())
             if d is not None and d.aborts:
                 self.last_decision = d
                 if self.log is not None:
@@ -291,8 +300,10 @@ class MissionRunner:
             await link.close()
             return self._outcome("aborted", self.ladder.reason)
         try:
-            self.streamer = SetpointStreamer(link.offboard._plugin, self.log, self.fl.rate_hz)
+            self.streamer = SetpointStreamer(link.offboard._plugin, self.log, self.fl.rate_hz,
+                                             here=lambda: (link.state.n_m, link.state.e_m, link.state.d_m))  # fmt: skip
             link.on_posvel.append(self._on_posvel)
+            link.on_attitude.append(self.guard.note_state_sample)
             link.on_imu.append(self._on_imu)
             link.on_mode.append(self._on_mode)
             link.on_connection.append(self._on_connection)
@@ -303,6 +314,7 @@ class MissionRunner:
                 from flighttest.panel import LivePanel
 
                 panel = LivePanel(self, console)
+            self.panel = panel
             with panel if panel is not None else contextlib.nullcontext():
                 return await self._fly()
         finally:
@@ -343,7 +355,9 @@ class MissionRunner:
         if not req.yes:
             if not sys.stdin.isatty():
                 raise _Refused("no terminal to confirm arming: pass --yes to fly without the go/no-go prompt")
-            if req.confirm is None or not req.confirm(pre):
+            with self.panel.paused() if self.panel is not None else contextlib.nullcontext():
+                go = req.confirm is not None and req.confirm(pre)
+            if not go:
                 raise _Refused("no-go from the operator")
             self.event("go", by="operator")
         flow = asyncio.create_task(self._nominal())
@@ -357,7 +371,7 @@ class MissionRunner:
             return result
         await self._run_ladder()
         outcome = "aborted"
-        if self.cfg.mission == "probe" and self.abort_verdict in (gd.FLUCTUATION, gd.SPEED_CAP):
+        if self.cfg.mission == "probe" and self.abort_verdict in (gd.FLUCTUATION, gd.SPEED_CAP, gd.FLOOR):
             outcome = "probe_stopped"
         return self._outcome(outcome, self.ladder.reason)
 
@@ -385,7 +399,8 @@ class MissionRunner:
         return pre
 
     # -- nominal flow ------------------------------------------------------------------------------
-    async def _nominal(self) -> FlightOutcome:
+    async def _nominal(self) -> FlightOutcome | None:
+        """The nominal flow; returns None once an abort has started (the ladder takes over)."""
         link, fl = self.link, self.fl
         st = link.state
         H = fl.start_height_m
@@ -421,21 +436,39 @@ class MissionRunner:
             return Setpoint(start[0], start[1], d0 + f * (start[2] - d0), yaw_deg=yaw0)
 
         await self.streamer.stream(climb_at, "climb", lambda: self.ladder.active)
+        if self.ladder.active:  # the ladder owns the vehicle now: this flow must not send anything
+            return None
         self.set_phase("settle")
         hold = Setpoint(*start, yaw_deg=yaw0)
-        await self._settle(hold, fl.settle_s, fl.settle_s * 3 + 10.0)
+        await self._settle(hold, fl.settle_s, fl.settle_s * 3 + 10.0, baseline=True)
+        if self.ladder.active:
+            return None
         self.origin = start
         last = self.traj.df.iloc[-1]
-        self.end_point = (start[0] + last["n_m"], start[1] + last["e_m"], start[2] + last["d_m"])
+        if math.dist((last["n_m"], last["e_m"], last["d_m"]), (0.0, 0.0, 0.0)) > START_TOL_M:
+            # a descent time only where the trajectory goes somewhere (the probe returns to its start)
+            self.end_point = (start[0] + last["n_m"], start[1] + last["e_m"], start[2] + last["d_m"])
         self.set_phase("stream")
         self.floor_active = True
         self.t_stream_start = time.monotonic()
         self.event("stream_start", origin_ned=list(start), rows=len(self.traj.df))
-        res = await self.streamer.fly_trajectory(self.traj, start, lambda: self.ladder.active)
+        rate_base, accel_base = self.guard.freeze_baseline()
+        rate_thr, accel_thr = self.guard.fluct_thresholds()
+        self.event("fluct_baseline", rate_std_dps=rate_base, accel_std_mps2=accel_base,
+                   rate_threshold_dps=rate_thr, accel_threshold_mps2=accel_thr)  # fmt: skip
+        self.guard.fluct_active = True
+        try:
+            res = await self.streamer.fly_trajectory(self.traj, start, lambda: self.ladder.active)
+        finally:
+            self.guard.fluct_active = False
         self.event("stream_end", result=res, jitter=self.streamer.jitter())
+        if self.ladder.active:
+            return None
         end_sp = self.streamer.last.hold() if self.streamer.last else hold
         self.set_phase("settle")
         await self._settle(end_sp, fl.settle_s, fl.settle_s * 3 + 10.0)
+        if self.ladder.active:
+            return None
         self.floor_active = False
         self.expect_offboard = False
         if fl.land:
@@ -453,7 +486,9 @@ class MissionRunner:
                 raise RuntimeError("Hold not confirmed after the flight (--no-land)")
         return self._outcome("completed", None)
 
-    async def _settle(self, sp: Setpoint, min_s: float, max_s: float) -> None:
+    async def _settle(self, sp: Setpoint, min_s: float, max_s: float, baseline: bool = False) -> None:
+        """Hover at ``sp`` until settled; with ``baseline`` the guard's hover fluctuation baseline is
+        the settled part of it (the climb's transient is not the hover)."""
         st = self.link.state
         t0 = time.monotonic()
         settled_since = None
@@ -466,6 +501,8 @@ class MissionRunner:
             err = math.dist((st.n_m, st.e_m, st.d_m), (sp.n_m, sp.e_m, sp.d_m))
             speed = math.sqrt(st.vn_mps**2 + st.ve_mps**2 + st.vd_mps**2)
             if err <= START_TOL_M and speed <= SETTLE_SPEED_MPS:
+                if settled_since is None and baseline:
+                    self.guard.start_baseline()
                 settled_since = now if settled_since is None else settled_since
             else:
                 settled_since = None

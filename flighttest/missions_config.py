@@ -6,7 +6,8 @@
     [flight]    start_height_m, min_alt_m, geofence_radius_m, settle_s, rate_hz, land, takeoff_timeout_s
     [plan]      mission-specific planner inputs (free-form numbers/strings, passed to the planner)
     [guard]     horizon_s, debounce_samples, clear_violation_mps, stale_periods, observe_region,
-                max_descent_mps, fluct_window_s, max_rate_std_dps, max_accel_std_mps2
+                max_descent_mps, fluct_window_s, max_rate_std_dps, max_accel_std_mps2, fluct_ratio,
+                fluct_min_rate_std_dps, fluct_min_accel_std_mps2
     [abort]     recover_max_s, arrested_vd_mps, hold_confirm_s, hold_dwell_s, recovery_lateral_mps,
                 recovery_climb_mps, recovery_s
 
@@ -50,8 +51,11 @@ class GuardConfig:
     observe_region: bool = False
     max_descent_mps: float | None = None
     fluct_window_s: float = 0.5
-    max_rate_std_dps: float | None = None
+    max_rate_std_dps: float | None = None  # absolute fluctuation limits while streaming
     max_accel_std_mps2: float | None = None
+    fluct_ratio: float | None = None  # × the hover fluctuation measured in the settle before streaming
+    fluct_min_rate_std_dps: float = 0.0  # the ratio's threshold is never below these
+    fluct_min_accel_std_mps2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -96,7 +100,8 @@ def _as_dict(obj) -> dict[str, Any]:
 
 # numbers that may be zero (everything else numeric must be > 0)
 _NON_NEGATIVE = {"horizon_s", "clear_violation_mps", "settle_s", "min_alt_m", "recovery_lateral_mps",
-                 "recovery_climb_mps", "recovery_s", "hold_dwell_s", "min_battery_percent"}  # fmt: skip
+                 "recovery_climb_mps", "recovery_s", "hold_dwell_s", "min_battery_percent",
+                 "fluct_min_rate_std_dps", "fluct_min_accel_std_mps2"}  # fmt: skip
 
 
 def _validated(cls, raw: dict[str, Any], where: str):

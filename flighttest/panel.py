@@ -4,8 +4,10 @@ the guard (rich's Live redraws from its own thread)."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
+from collections.abc import Iterator
 
 from rich.live import Live
 from rich.table import Table
@@ -25,9 +27,10 @@ class LivePanel:
         r = self.runner
         st = r.link.state if r.link is not None else None
         d = r.last_decision
-        t = Table(title=f"flighttest fly — {r.mission_name}", show_header=False, min_width=60)
-        t.add_column("what", style="bold")
-        t.add_column("value")
+        t = Table(title=f"flighttest fly — {r.mission_name}", show_header=False)
+        # fixed widths: the frame must not jump as the numbers change length
+        t.add_column("what", style="bold", width=16, no_wrap=True)
+        t.add_column("value", width=52, no_wrap=True, overflow="ellipsis")
         abort = f"  [red]ABORT {r.ladder.rung.name}: {r.ladder.reason}[/]" if r.ladder.active else ""
         t.add_row("phase", r.phase + abort)
         if st is not None:
@@ -54,3 +57,12 @@ class LivePanel:
 
     def __exit__(self, *exc) -> None:
         self.live.__exit__(*exc)
+
+    @contextlib.contextmanager
+    def paused(self) -> Iterator[None]:
+        """Stop redrawing (for the go/no-go prompt: a redraw would overwrite the operator's answer)."""
+        self.live.stop()
+        try:
+            yield
+        finally:
+            self.live.start()

@@ -66,7 +66,8 @@ def jitter_stats_ms(intervals_s: np.ndarray, period_s: float) -> dict[str, float
 class SetpointStreamer:
     """Sends setpoints through MAVSDK's offboard plugin and logs each one with its send time."""
 
-    def __init__(self, offboard_plugin, log=None, rate_hz: float = 50.0, stuck_after_s: float = 0.15) -> None:
+    def __init__(self, offboard_plugin, log=None, rate_hz: float = 50.0, stuck_after_s: float = 0.15,
+                 here: Callable[[], tuple[float, float, float]] | None = None) -> None:  # fmt: skip
         from mavsdk.plugins.offboard import AccelerationNed, PositionNedYaw, VelocityNedYaw
 
         self._P, self._V, self._A = PositionNedYaw, VelocityNedYaw, AccelerationNed
@@ -87,6 +88,8 @@ class SetpointStreamer:
         self._watchdog: threading.Thread | None = None
         self.watchdog_fired = 0
         self.on_send: list[Callable[[float, Setpoint], None]] = []
+        # where the vehicle is now (local NED): a stream that stops early holds there
+        self.here = here
 
     # -- one setpoint ------------------------------------------------------------------------------
     def send(self, sp: Setpoint, phase: str) -> bool:
@@ -140,26 +143,50 @@ class SetpointStreamer:
         max_ticks: int | None = None,
     ) -> str:
         """Send ``setpoint_at(k)`` at tick ``k`` until it returns None (→ "done"), ``should_stop()``
-        (→ "stopped") or ``max_ticks`` (→ "done"). Deadline pacing on the loop's clock."""
+        (→ "stopped") or ``max_ticks`` (→ "done"). Deadline pacing on the loop's clock.
+
+        Whatever ends it, the setpoint left for MAVSDK's resend is a hold: at the last setpoint's
+        position when the stream ran out, at the vehicle's position (``here``) when it was stopped,
+        cancelled or failed. A setpoint that already holds is not sent again."""
         loop = asyncio.get_running_loop()
         t0 = loop.time()
         k = 0
-        while True:
-            if should_stop():
-                return "stopped"
-            sp = setpoint_at(k)
-            if sp is None:
-                return "done"
-            self.send(sp, phase)
-            if max_ticks is not None and k + 1 >= max_ticks:
-                return "done"
-            nxt = k + 1
-            delay = t0 + nxt * self.period_s - loop.time()
-            if delay < -self.period_s:  # more than a tick late: send the row that belongs to now
-                nxt = int((loop.time() - t0) / self.period_s) + 1
+        result = "failed"
+        try:
+            while True:
+                if should_stop():
+                    result = "stopped"
+                    return result
+                sp = setpoint_at(k)
+                if sp is None:
+                    result = "done"
+                    return result
+                self.send(sp, phase)
+                if max_ticks is not None and k + 1 >= max_ticks:
+                    result = "done"
+                    return result
+                nxt = k + 1
                 delay = t0 + nxt * self.period_s - loop.time()
-            await asyncio.sleep(max(delay, 0.0))
-            k = nxt
+                if delay < -self.period_s:  # more than a tick late: send the row that belongs to now
+                    nxt = int((loop.time() - t0) / self.period_s) + 1
+                    delay = t0 + nxt * self.period_s - loop.time()
+                await asyncio.sleep(max(delay, 0.0))
+                k = nxt
+        finally:
+            self.leave_safe(phase, at_vehicle=result != "done")
+
+    def leave_safe(self, phase: str, at_vehicle: bool = True) -> Setpoint | None:
+        """Make the setpoint MAVSDK keeps re-sending a hold (zero velocity and acceleration); at the
+        vehicle's position if ``at_vehicle`` and known, else at the last setpoint's position."""
+        last = self.last
+        if last is None or last == last.hold():
+            return None
+        n, e, d = last.n_m, last.e_m, last.d_m
+        if at_vehicle and self.here is not None:
+            pos = self.here()
+            if all(math.isfinite(x) for x in pos):
+                n, e, d = pos
+        return self.leave_hold(n, e, d, last.yaw_deg, f"{phase}_hold")
 
     async def fly_trajectory(
         self, traj: Trajectory, origin_ned: tuple[float, float, float], should_stop: Callable[[], bool],

@@ -1,16 +1,21 @@
 """VRS probe: a sine sweep ``Z(t) = Z0 + A sin(ω0 t²)`` whose descent speed grows slowly, to find the
 vehicle's real VRS onset (paper §IV, NOTES §3).
 
-The guard *observes* the cone (it logs where the vehicle enters the region but does not act), and
-enforces hard limits: a descent-speed cap, the altitude floor, and the fluctuation detector
-(angular-rate and vertical-acceleration standard deviation over a short window). The first limit
-hit ends the probe with the abort ladder — the expected end (outcome ``probe_stopped``).
+The sweep ramps in, then each cycle descends a little faster, up to a top speed beyond the onset it
+looks for (``max_descent_ratio`` × the profile's ``w_allow`` unless ``max_descent_mps`` or
+``--max-descent-speed`` says otherwise). The guard *observes* the cone (it logs where the vehicle
+enters the region but does not act), and enforces hard limits: a descent-speed cap, the altitude
+floor, and the fluctuation detector (angular-rate and vertical-acceleration std over a short window
+against the hover measured just before the sweep). The first limit hit ends the probe with the
+abort ladder (arrest the sink, hold, land) — the expected end (outcome ``probe_stopped``).
+Then ``flighttest identify LOG --vehicle NAME`` finds the onset in the log.
 
     flighttest fly probe --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
 """
 
 from pathlib import Path
 
+from flighttest.errors import FlighttestError
 from flighttest.missions_config import MissionConfig
 from flighttest.planner.export import probe_trajectory
 from flighttest.planner.probe import plan_probe
@@ -20,16 +25,36 @@ from flighttest.trajectory import Trajectory
 CONFIG = Path(__file__).with_suffix(".toml")
 
 
+def top_speed_mps(profile: VehicleProfile, cfg: MissionConfig) -> float:
+    """The sweep's top descent speed: explicit, else a multiple of the vehicle's ``w_allow``."""
+    p = cfg.plan
+    if "max_descent_mps" in p:
+        return float(p["max_descent_mps"])
+    return float(p.get("max_descent_ratio", 1.75)) * profile.w_allow_mps
+
+
 def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
     p, fl = cfg.plan, cfg.flight
+    top = top_speed_mps(profile, cfg)
+    cap = cfg.guard.max_descent_mps
+    if cap is not None and cap <= top:
+        raise FlighttestError(
+            f"probe: the guard's descent cap {cap:g} m/s must exceed the sweep's top speed {top:.2f} m/s "
+            "(raise [guard] max_descent_mps or lower the top speed)"
+        )
+    frac = float(p.get("accel_fraction", 0.5))
+    if not 0 < frac <= 1:
+        raise FlighttestError(f"probe: accel_fraction must lie in (0, 1] (got {frac:g})")
     pp = plan_probe(
         amplitude_m=float(p.get("amplitude_m", 2.0)),
         omega0_rps2=float(p.get("omega0_rps2", 0.05)),
         ramp_s=float(p.get("ramp_s", 3.0)),
-        max_descent_mps=float(cfg.guard.max_descent_mps or 3.0),
+        max_descent_mps=top,
         duration_s=float(p.get("duration_s", 40.0)),
         start_alt_m=fl.start_height_m,
         floor_alt_m=fl.min_alt_m,
+        max_accel_down_mps2=frac * profile.max_accel_down_mps2,
+        max_accel_up_mps2=frac * profile.max_accel_up_mps2,
     )
     return probe_trajectory(pp, profile.name, profile.mass_kg)
 

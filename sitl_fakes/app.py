@@ -49,7 +49,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth-severity", type=float, default=1.0,
                    help="scales thrust loss and fluctuation (default 1, 0 = no VRS effect)")
     p.add_argument("--seed", type=int, default=0, help="random seed of fluctuations and gusts (default 0)")
-    p.add_argument("--wind-ned", default="0,0,0", metavar="N,E,D", help="steady wind in m/s, NED (default 0,0,0)")
+    p.add_argument("--wind-ned", nargs="+", default=["0,0,0"], metavar="N E D",
+                   help="steady wind in m/s, NED: 'N E D' (as flighttest fly takes it) or 'N,E,D' (default 0 0 0)")
     p.add_argument("--gust-mps", type=float, default=0.0, help="gust standard deviation in m/s (default 0)")
     p.add_argument("--physics-hz", type=float, default=250.0, help="physics rate (default 250)")
     p.add_argument("--telemetry-hz", type=float, default=50.0,
@@ -105,7 +106,7 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
     return FakeConfig(
         profile=profile,
         truth=truth,
-        wind_ned=_parse_triple(args.wind_ned, "--wind-ned"),
+        wind_ned=_parse_triple(",".join(args.wind_ned), "--wind-ned"),
         gust_mps=args.gust_mps,
         seed=args.seed,
         crash_speed_mps=args.crash_speed_mps,

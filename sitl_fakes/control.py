@@ -51,6 +51,8 @@ class Limits:
     z_vel_i: float = 2.0
     roll_p: float = 6.5
     yaw_p: float = 2.8
+    tilt_rate_ff_tau_s: float = 0.04  # low-pass of the tilt-rate feed-forward; 0 turns it off
+    yaw_weight: float = 0.4  # MC_YAW_WEIGHT: tilt first, yaw follows at this weight (as PX4)
 
 
 class Controller:
@@ -122,17 +124,16 @@ class Controller:
     # -- inner loops ---------------------------------------------------------------------------------
     def rotor_thrusts(self, dt_s, s: RigidBodyState, bz, collective_n, yaw_rad, lim: Limits):
         """Attitude P → rate PI → mixer with desaturation; returns four rotor thrust commands (N)."""
-        qd = _quat_from_z_and_yaw(bz, yaw_rad)
-        # error quaternion q_e = q⁻¹ ⊗ q_d
-        aw, ax, ay, az = s.qw, -s.qx, -s.qy, -s.qz
-        bw, bx, by, bzq = qd
-        ew = aw * bw - ax * bx - ay * by - az * bzq
-        ex = aw * bx + ax * bw + ay * bzq - az * by
-        ey = aw * by - ax * bzq + ay * bw + az * bx
-        ez = aw * bzq + ax * by - ay * bx + az * bw
+        q = (s.qw, s.qx, s.qy, s.qz)
+        qd = _reduced_attitude_setpoint(q, _quat_from_z_and_yaw(bz, yaw_rad), lim.yaw_weight)
+        # error quaternion q_e = q⁻¹ ⊗ q_d, canonical (shortest way round)
+        ew, ex, ey, ez = _qmul(_qconj(q), qd)
         if ew < 0.0:
             ex, ey, ez = -ex, -ey, -ez
-        rate_sp = [2.0 * lim.roll_p * ex, 2.0 * lim.roll_p * ey, 2.0 * lim.yaw_p * ez]
+        yaw_gain = lim.yaw_p / lim.yaw_weight if lim.yaw_weight > 1e-4 else lim.yaw_p
+        rate_sp = [2.0 * lim.roll_p * ex, 2.0 * lim.roll_p * ey, 2.0 * yaw_gain * ez]
+        ff = self._tilt_rate_feedforward(dt_s, q, bz, lim)
+        rate_sp = [rate_sp[0] + ff[0], rate_sp[1] + ff[1], rate_sp[2]]
         for i in range(3):
             r = self.rate_max_radps[i]
             rate_sp[i] = min(max(rate_sp[i], -r), r)
@@ -147,6 +148,29 @@ class Controller:
             moments.append(inertia * (gain * err + self.rate_int[i]))
         self.last_collective_n = collective_n
         return self.mix(collective_n, moments[0], moments[1], moments[2])
+
+    def _tilt_rate_feedforward(self, dt_s, q, bz, lim: Limits):
+        """Body rates (FRD) that turn the thrust axis as fast as its setpoint turns: ``ḃ_z × b_z``
+        in the world frame, from the setpoint's change per step, low-passed (the setpoint arrives in
+        steps at the offboard rate). Without it the attitude loop trails a turning thrust vector by
+        ``rate / MC_ROLL_P`` and a helix is flown with a persistent acceleration error."""
+        prev = self._bz_prev
+        self._bz_prev = bz
+        if prev is None or lim.tilt_rate_ff_tau_s <= 0:
+            return (0.0, 0.0)
+        dn, de, dd = ((bz[i] - prev[i]) / dt_s for i in range(3))
+        wn = bz[1] * dd - bz[2] * de
+        we = bz[2] * dn - bz[0] * dd
+        wd = bz[0] * de - bz[1] * dn
+        a = dt_s / (lim.tilt_rate_ff_tau_s + dt_s)
+        f = self._ff_world
+        self._ff_world = (f[0] + a * (wn - f[0]), f[1] + a * (we - f[1]), f[2] + a * (wd - f[2]))
+        # world → body: R(q)ᵀ v
+        bx, by, _ = _rotate_ned_to_body(q, self._ff_world)
+        return (bx, by)
+
+    _bz_prev = None
+    _ff_world = (0.0, 0.0, 0.0)
 
     def mix(self, collective_n, mx, my, mz):
         a, k = self.arm_xy_m, self.k_yaw_m
@@ -176,6 +200,54 @@ class Controller:
             elif y < 0 and o + y < lo_t:
                 ys = min(ys, max(0.0, (lo_t - o) / y))
         return [min(max(o + ys * y, lo_t), hi_t) for o, y in zip(out, yw)]
+
+
+def _qmul(a, b):
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def _rotate_ned_to_body(q, v):
+    w, x, y, z = q
+    vx, vy, vz = v
+    return (
+        (1 - 2 * (y * y + z * z)) * vx + 2 * (x * y + w * z) * vy + 2 * (x * z - w * y) * vz,
+        2 * (x * y - w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z + w * x) * vz,
+        2 * (x * z + w * y) * vx + 2 * (y * z - w * x) * vy + (1 - 2 * (x * x + y * y)) * vz,
+    )
+
+
+def _qconj(a):
+    return (a[0], -a[1], -a[2], -a[3])
+
+
+def _reduced_attitude_setpoint(q, qd, yaw_weight: float):
+    """PX4's ``AttitudeControl::update`` setpoint: first the shortest rotation that brings the thrust
+    axis onto the desired one (the tilt, which moves the vehicle), then only ``yaw_weight`` of the
+    remaining rotation about it (the heading). Without this, a large heading error drags the thrust
+    axis off its setpoint and the position loops see it as an acceleration error."""
+    ez = (2 * (q[1] * q[3] + q[0] * q[2]), 2 * (q[2] * q[3] - q[0] * q[1]), 1 - 2 * (q[1] ** 2 + q[2] ** 2))
+    ezd = (2 * (qd[1] * qd[3] + qd[0] * qd[2]), 2 * (qd[2] * qd[3] - qd[0] * qd[1]), 1 - 2 * (qd[1] ** 2 + qd[2] ** 2))
+    cx = ez[1] * ezd[2] - ez[2] * ezd[1]
+    cy = ez[2] * ezd[0] - ez[0] * ezd[2]
+    cz = ez[0] * ezd[1] - ez[1] * ezd[0]
+    dot = ez[0] * ezd[0] + ez[1] * ezd[1] + ez[2] * ezd[2]
+    w = dot + math.sqrt(dot * dot + cx * cx + cy * cy + cz * cz)
+    n = math.sqrt(w * w + cx * cx + cy * cy + cz * cz)
+    if n < 1e-6:  # thrust axes opposite: no unique shortest rotation, use the full setpoint
+        return qd
+    red = _qmul((w / n, cx / n, cy / n, cz / n), q)  # world-frame tilt rotation applied to q
+    mw, _, _, mz = _qmul(_qconj(red), qd)  # what is left: a rotation about the thrust axis
+    if mw < 0.0:
+        mw, mz = -mw, -mz
+    mw, mz = min(max(mw, -1.0), 1.0), min(max(mz, -1.0), 1.0)
+    return _qmul(red, (math.cos(yaw_weight * math.acos(mw)), 0.0, 0.0, math.sin(yaw_weight * math.asin(mz))))
 
 
 def _quat_from_z_and_yaw(bz, yaw_rad):

@@ -71,6 +71,7 @@ def default_params() -> dict[str, Param]:
         "MC_ROLL_P": Param(6.5, f),
         "MC_PITCH_P": Param(6.5, f),
         "MC_YAW_P": Param(2.8, f),
+        "MC_YAW_WEIGHT": Param(0.4, f),
         "MC_ROLLRATE_MAX": Param(220.0, f),
         "MC_PITCHRATE_MAX": Param(220.0, f),
         "MC_YAWRATE_MAX": Param(200.0, f),

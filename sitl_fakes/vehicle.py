@@ -121,6 +121,7 @@ class FakePx4:
             z_vel_i=self.p("MPC_Z_VEL_I_ACC"),
             roll_p=self.p("MC_ROLL_P"),
             yaw_p=self.p("MC_YAW_P"),
+            yaw_weight=min(max(self.p("MC_YAW_WEIGHT"), 0.0), 1.0),
         )
 
     def event(self, kind: str, detail: str, severity: int | None = None) -> None:

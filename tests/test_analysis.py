@@ -358,3 +358,24 @@ def test_dataflash_units_documented_conventions(tmp_path, flight):
     log = load_log(p)
     assert log.state["vd_mps"].max() == pytest.approx(math.pi * H / (2 * D), abs=0.03)
     assert struct.calcsize("<QccC".replace("c", "h").replace("C", "H")) == 14
+
+
+def test_descents_of_an_oscillating_probe_do_not_overlap():
+    """A probe goes down and back up repeatedly: each descent ends before the next one starts."""
+    from flighttest.analysis.segment import find_descents
+
+    t = np.arange(0, 40, 0.02)
+    alt = np.full_like(t, 5.0)
+    for t0, depth in ((3.0, 1.0), (9.0, 1.5), (15.0, 2.0)):
+        # down at 0.5 m/s·depth, back up symmetrically, 4 s per cycle
+        ph = (t - t0) / 4.0
+        m = (ph >= 0) & (ph < 1)
+        alt[m] = 5.0 - depth * np.sin(np.pi * ph[m]) ** 2
+    alt[t >= 21.0] = np.interp(t[t >= 21.0], [21.0, 25.0, 40.0], [5.0, 1.0, 1.0])
+    d = -alt
+    state = pd.DataFrame({"t_s": t, "d_m": d, "vd_mps": np.gradient(d, t), "n_m": 0.0, "e_m": 0.0})
+    descents, _ = find_descents(state)
+    assert len(descents) == 4
+    assert (descents["end_s"].to_numpy()[:-1] <= descents["start_s"].to_numpy()[1:]).all()
+    last = descents.iloc[-1]
+    assert last["height_m"] == pytest.approx(4.0, abs=0.1) and last["settled"]

@@ -1,15 +1,37 @@
 """Identify the VRS onset from a probe flight: the descent speed where the shaking starts.
 
-Every airborne, descending sample of the probe contributes its ``fluct_index`` (fluctuation
-against the flight's own hover, :mod:`.fluctuation`, over a window of ``window_s``) and the
-**highest** blade-frame, air-relative descent speed ``w`` (as the guard measures it) reached within
-that same window: a window turns loud as soon as any part of it is past the onset, so pairing it
-with the window's top speed removes the bias a centre-sample speed would have. Samples are binned
-by that speed (``bin_mps``); the **onset** is where the binned median index first rises above
-``threshold_ratio`` and stays above it in the next populated bin, interpolated linearly between
-the last quiet bin and the first loud one. The **uncertainty** combines a bootstrap over the
-samples (``n_boot`` resamples, same procedure) with the bin quantisation (``bin/√12``). The result
-is also given normalised by the profile's ``v_h``.
+The model: below the onset the vehicle shakes as it does in hover; past it the ring vortex adds a
+fluctuation whose amplitude grows with the depth into the region (the paper's probe, and the fake's
+truth: thrust fluctuation ``σ ∝ w − onset``). Independent shaking adds in *variance*, so the
+expected fluctuation power at descent speed ``w`` is a hinge
+
+    E[P](w) = β0 + β1 · (w − w0)₊²            (β0: hover, β1 ≥ 0: growth, w0: the onset)
+
+and the onset is where the fitted rise meets the hover level — extrapolated back from the rise,
+not where a threshold is crossed (a threshold fires only once the rise has grown to it, which
+puts the onset high by the speed the rise needs to get there).
+
+``P`` is, per sample, the mean over the body rates p, q, r (the vertical acceleration when the log
+has no rates: the probe commands vertical acceleration but no rotation, so the rates carry the
+ring vortex's rocking and little else) of the squared high-passed signal (its second difference, so the probe's own
+commanded acceleration does not count and shaking does not leak to neighbouring speeds) divided by
+that signal's hover variance (floored far below real sensor noise, ``RATE_FLOOR_RADPS``, ``ACCEL_FLOOR_MPS2``). It is
+averaged over a centred window of ``window_s`` to tame its chi-square scatter, and the speed term
+``(w − w0)₊²`` is averaged over the same window, so the window smears model and data alike and
+does not bias ``w0``. ``w`` is the blade-frame, air-relative descent speed the guard uses.
+
+The fit is a gamma GLM with identity link (a windowed mean of squares is gamma-like: its scatter
+grows with its mean), by iteratively reweighted least squares for each ``w0`` on a grid of
+``step_mps``, keeping the ``w0`` of least deviance. Only the probe's own samples are used: from a
+flighttest log the ``settle`` and ``stream`` phases up to the first abort (the recovery manoeuvre
+shakes the vehicle by design), otherwise every airborne sample.
+
+The stated **uncertainty** is the spread of a residual block bootstrap (the fitted curve times
+the data's own relative scatter, resampled in blocks of ``block_s`` because neighbouring samples
+are correlated) combined with the speed resolution: the grid step and the
+speed change over the two telemetry periods the signal needs near the onset.
+An onset is reported only when the fitted fluctuation at the fastest descent flown is at least
+``threshold_ratio`` times the hover's (in RMS); otherwise the probe never reached it.
 """
 
 from __future__ import annotations
@@ -21,20 +43,29 @@ import numpy as np
 import pandas as pd
 
 from flighttest.analysis.exposure import velocity_track
-from flighttest.analysis.fluctuation import FluctuationConfig, fluctuation
-from flighttest.analysis.schema import FlightLog
+from flighttest.analysis.fluctuation import FluctuationConfig, hover_mask
+from flighttest.analysis.schema import RATES, FlightLog
 from flighttest.errors import FlighttestError
 from flighttest.profiles import VehicleProfile
+
+PROBE_PHASES = ("settle", "stream")
+# Per-sample noise floors of the differenced signals: far below any real gyro's or accelerometer's
+# noise, they only keep a simulator's perfectly still hover from a zero variance. A floor near real
+# sensor noise would hide the first, small part of the rise and push the fit's onset up.
+RATE_FLOOR_RADPS = 1e-4
+ACCEL_FLOOR_MPS2 = 1e-3
 
 
 @dataclass(frozen=True)
 class IdentifyConfig:
-    threshold_ratio: float = 2.0  # fluctuation at least this many times the hover's
-    bin_mps: float = 0.05
-    min_samples_per_bin: int = 5
-    window_s: float = 0.5  # fluctuation window (shorter than for reports: the probe's speed changes)
-    n_boot: int = 200
-    min_speed_mps: float = 0.05  # slower than this is hover, not descent
+    threshold_ratio: float = 2.0  # fitted RMS fluctuation at the top speed ≥ this × hover, else no onset
+    window_s: float = 0.2  # averaging window of the fluctuation power
+    step_mps: float = 0.005  # onset grid
+    min_samples_above: int = 10  # a candidate onset needs this many samples faster than it
+    n_boot: int = 100
+    block_s: float = 1.0
+    min_speed_mps: float = 0.05  # the fit needs descending samples faster than this
+    irls_iterations: int = 6
 
 
 @dataclass(frozen=True)
@@ -47,32 +78,101 @@ class Onset:
     threshold_ratio: float
     max_speed_mps: float
     samples: int
-    bins: pd.DataFrame
+    rise_ratio: float  # fitted RMS fluctuation at max_speed_mps / hover's
+    bootstrap_sd_mps: float
+    resolution_mps: float
+    signals: tuple[str, ...]
+    bins: pd.DataFrame  # fluctuation power (data and fit) binned by speed, for plots and reports
 
     def summary(self) -> dict:
         d = asdict(self)
         d.pop("bins")
+        d["signals"] = list(self.signals)
         return d
 
 
-def _onset_from_bins(centers: np.ndarray, med: np.ndarray, thr: float) -> float:
-    loud = med > thr
-    for k in np.flatnonzero(loud):
-        if k + 1 < len(loud) and not loud[k + 1]:
-            continue  # a single loud bin followed by a quiet one is noise
-        if k == 0:
-            return float(centers[0])
-        f = (thr - med[k - 1]) / (med[k] - med[k - 1])
-        return float(centers[k - 1] + np.clip(f, 0, 1) * (centers[k] - centers[k - 1]))
-    return math.nan
+def _high_passed(x: np.ndarray) -> np.ndarray:
+    """Backward first difference over √2 (white noise keeps its variance): it removes anything slower
+    than a few samples — the probe's commanded acceleration, a steady rate — and, unlike subtracting a
+    centred moving average, never spreads a sample's shaking onto earlier samples (where the strong
+    shaking past the onset would leak back onto the quiet speeds below it). For body rates it is the
+    angular acceleration, which shows a disturbance torque at once rather than after the rate builds."""
+    hp = np.full(len(x), np.nan)
+    hp[1:] = np.diff(x) / math.sqrt(2.0)
+    return pd.Series(hp).bfill().to_numpy()
 
 
-def _binned(w: np.ndarray, idx: np.ndarray, cfg: IdentifyConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    b = np.floor(w / cfg.bin_mps).astype(np.int64)
-    frame = pd.DataFrame({"b": b, "i": idx}).groupby("b")["i"].agg(["median", "size"])
-    frame = frame[frame["size"] >= cfg.min_samples_per_bin]
-    centers = (frame.index.to_numpy() + 0.5) * cfg.bin_mps
-    return centers, frame["median"].to_numpy(), frame["size"].to_numpy()
+def _centred_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving mean along the last axis, ignoring NaN (edges: as much window as there is)."""
+    frame = pd.DataFrame(np.atleast_2d(x).T)
+    out = frame.rolling(n, center=True, min_periods=1).mean().to_numpy().T
+    return out if np.ndim(x) > 1 else out[0]
+
+
+def fluctuation_power(state: pd.DataFrame, hover: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Per-sample squared high-passed signals over their hover variance, averaged over the signals."""
+    parts, names = [], []
+    for col, floor in [*((c, RATE_FLOOR_RADPS) for c in RATES), ("ad_mps2", ACCEL_FLOOR_MPS2)]:
+        x = state[col].to_numpy(float) if col in state else np.full(len(state), np.nan)
+        if np.isfinite(x).mean() < 0.9 or (col == "ad_mps2" and names):
+            continue  # with body rates, leave out the vertical acceleration: the probe commands it
+        hp2 = _high_passed(np.nan_to_num(x, nan=float(np.nanmedian(x)))) ** 2
+        base = float(np.median(hp2[hover])) if hover.any() else float(np.median(hp2))
+        # the floor keeps a perfectly still hover (a simulator) from dividing by zero, and keeps P > 0
+        parts.append((hp2 + floor**2) / (base + floor**2))
+        names.append(col)
+    if not parts:
+        raise FlighttestError("no fluctuation signal (needs body rates or vertical acceleration)")
+    return np.mean(parts, axis=0), names
+
+
+def _fit_grid(y: np.ndarray, z: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gamma GLM ``y ≈ b0 + b1·z`` (identity link, b0 > 0, b1 ≥ 0) for each row of ``z``: returns
+    ``b0, b1, deviance`` per row."""
+    g = z.shape[0]
+    b0 = np.full(g, float(np.mean(y)))
+    b1 = np.zeros(g)
+    yy = y[None, :]
+    for _ in range(iterations):
+        mu = np.maximum(b0[:, None] + b1[:, None] * z, 1e-12)
+        wgt = 1.0 / mu**2
+        sw, swz, swzz = wgt.sum(1), (wgt * z).sum(1), (wgt * z * z).sum(1)
+        swy, swzy = (wgt * yy).sum(1), (wgt * z * yy).sum(1)
+        det = sw * swzz - swz**2
+        ok = det > 1e-12 * np.maximum(sw * swzz, 1e-300)
+        nb1 = np.where(ok, (sw * swzy - swz * swy) / np.where(ok, det, 1.0), 0.0)
+        nb0 = np.where(ok, (swy - nb1 * swz) / sw, swy / sw)
+        flat = nb1 < 0  # no rise: the hover level alone
+        nb1 = np.where(flat, 0.0, nb1)
+        nb0 = np.where(flat, swy / sw, nb0)
+        b0, b1 = np.maximum(nb0, 1e-12), nb1
+    mu = np.maximum(b0[:, None] + b1[:, None] * z, 1e-12)
+    dev = 2.0 * ((yy - mu) / mu - np.log(yy / mu)).sum(1)
+    return b0, b1, dev
+
+
+def _onset_from(y, zs, grid, iterations) -> tuple[float, float, float, int]:
+    b0, b1, dev = _fit_grid(y, zs, iterations)
+    dev = np.where(b1 > 0, dev, np.inf)
+    if not np.isfinite(dev).any():
+        return math.nan, math.nan, math.nan, -1
+    k = int(np.argmin(dev))
+    return float(grid[k]), float(b0[k]), float(b1[k]), k
+
+
+def _probe_mask(log: FlightLog, t: np.ndarray) -> np.ndarray | None:
+    """Samples in the probe's settle/stream phases before the first abort (flighttest logs only)."""
+    sp = log.setpoints
+    if sp is None or len(sp) == 0 or "phase" not in sp:
+        return None
+    sp = sp.sort_values("t_s")
+    idx = np.searchsorted(sp["t_s"].to_numpy(float), t, side="right") - 1
+    phase = np.where(idx >= 0, sp["phase"].to_numpy(object)[np.clip(idx, 0, None)], "")
+    mask = np.isin(phase, PROBE_PHASES)
+    aborts = [float(e["t_s"]) for e in (log.events or []) if e.get("event") == "abort" and "t_s" in e]
+    if aborts:
+        mask &= t < min(aborts)
+    return mask if mask.any() else None
 
 
 def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig | None = None) -> Onset:
@@ -82,45 +182,90 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         from flighttest.analysis.segment import find_descents
 
         find_descents(state)
-    fl, _ = fluctuation(state, FluctuationConfig(window_s=cfg.window_s))
-    if not np.isfinite(fl["fluct_index"]).any():
-        raise FlighttestError(f"{log.name}: no fluctuation signal (needs body rates, IMU or motor outputs)")
-    track = velocity_track(state, profile)
-    t = state["t_s"].to_numpy()
-    n_win = max(3, round(cfg.window_s / max(float(np.median(np.diff(t))), 1e-6)))
-    w = pd.Series(track["w_mps"].to_numpy()).rolling(n_win, center=True, min_periods=1).max().to_numpy()
-    idx = fl["fluct_index"].to_numpy()
-    h = -state["d_m"].to_numpy()
-    use = (w > cfg.min_speed_mps) & np.isfinite(idx) & ~state["glitch"].to_numpy(bool) & (h > np.nanmin(h) + 0.5)
-    if use.sum() < 3 * cfg.min_samples_per_bin:
-        raise FlighttestError(f"{log.name}: too few descending samples to identify an onset ({int(use.sum())})")
-    w_use, idx_use = w[use], idx[use]
-    centers, med, size = _binned(w_use, idx_use, cfg)
-    onset = _onset_from_bins(centers, med, cfg.threshold_ratio)
-    if not math.isfinite(onset):
+    t = state["t_s"].to_numpy(float)
+    if len(t) < 10:
+        raise FlighttestError(f"{log.name}: too few samples to identify an onset ({len(t)})")
+    dt = max(float(np.median(np.diff(t))), 1e-6)
+    n_win = max(3, round(cfg.window_s / dt))
+    hover = hover_mask(state, FluctuationConfig())
+    try:
+        power, signals = fluctuation_power(state, hover)
+    except FlighttestError as exc:
+        raise FlighttestError(f"{log.name}: {exc}") from None
+    w_all = velocity_track(state, profile)["w_mps"].to_numpy(float)
+    h = -state["d_m"].to_numpy(float)
+    use = np.isfinite(power) & np.isfinite(w_all) & ~state["glitch"].to_numpy(bool) & (h > np.nanmin(h) + 0.5)
+    probe = _probe_mask(log, t)
+    if probe is not None:
+        use &= probe
+    # windows average over selected samples only: the recovery's shaking must not leak back in
+    y_all = _centred_mean(np.where(use, power, np.nan), n_win)
+    descending = use & (w_all > cfg.min_speed_mps)
+    if descending.sum() < 3 * cfg.min_samples_above:
+        raise FlighttestError(f"{log.name}: too few descending samples to identify an onset ({int(descending.sum())})")
+    w_top = float(w_all[descending].max())
+    w_sorted = np.sort(w_all[use])
+    hi = w_sorted[-cfg.min_samples_above] if len(w_sorted) > cfg.min_samples_above else w_top
+    grid = np.arange(cfg.min_speed_mps, max(hi, cfg.min_speed_mps + cfg.step_mps), cfg.step_mps)
+    # the model's speed term, windowed exactly like the data (computed on the whole series, then selected)
+    w_filled = np.nan_to_num(w_all, nan=0.0)
+    excess2 = np.maximum(w_filled[None, :] - grid[:, None], 0.0) ** 2
+    zs = _centred_mean(np.where(use[None, :], excess2, np.nan), n_win)[:, use]
+    y = y_all[use]
+    w0, b0, b1, k = _onset_from(y, zs, grid, cfg.irls_iterations)
+    rise = math.sqrt((b0 + b1 * max(w_top - w0, 0.0) ** 2) / b0) if math.isfinite(w0) else 1.0
+    if not math.isfinite(w0) or rise < cfg.threshold_ratio:
         raise FlighttestError(
-            f"{log.name}: fluctuation never rose above {cfg.threshold_ratio:g}× hover up to "
-            f"{float(w_use.max()):.2f} m/s descent: no onset found (w_allow is at least that)"
+            f"{log.name}: fluctuation never rose above {cfg.threshold_ratio:g}× hover up to {w_top:.2f} m/s "
+            f"descent: no onset found (w_allow is at least that)"
         )
+    # residual block bootstrap: the speeds flown stay as they were (the few samples past the onset
+    # are the design, not something to resample away); the multiplicative scatter y/μ is resampled
+    # in blocks of consecutive samples, which keeps its correlation
     rng = np.random.default_rng(0)
+    n = len(y)
+    mu = b0 + b1 * zs[k]
+    ratio = y / mu
+    block = max(1, round(cfg.block_s / dt))
+    n_blocks = math.ceil(n / block)
     boots = []
     for _ in range(cfg.n_boot):
-        pick = rng.integers(0, len(w_use), len(w_use))
-        c, m, _ = _binned(w_use[pick], idx_use[pick], cfg)
-        boots.append(_onset_from_bins(c, m, cfg.threshold_ratio))
+        starts = rng.integers(0, max(n - block, 0) + 1, n_blocks)
+        pick = (starts[:, None] + np.arange(block)[None, :]).ravel()[:n]
+        boots.append(_onset_from(mu * ratio[pick], zs, grid, cfg.irls_iterations)[0])
     boots = np.asarray(boots)
     boot_sd = float(np.nanstd(boots)) if np.isfinite(boots).sum() > 1 else 0.0
-    unc = math.sqrt(boot_sd**2 + cfg.bin_mps**2 / 12)
+    # speed resolution: the grid (uniform, /√12), and how far w moves in the two sample periods the
+    # fluctuation signal needs (the difference, and the alignment of the IMU and position streams),
+    # taken as a uniform error of that half-width (/√3)
+    near = use & (w_all >= w0) & (w_all <= w0 + 0.05)  # just past the onset, where the rise is seen
+    dw = np.abs(np.gradient(w_filled, t))[near] * 2.0 * dt
+    lag_w = float(np.median(dw)) if len(dw) else 0.0
+    resolution = math.sqrt(cfg.step_mps**2 / 12.0 + lag_w**2 / 3.0)
+    unc = math.sqrt(boot_sd**2 + resolution**2)
     v_h = profile.v_h_mps
-    bins = pd.DataFrame({"w_mps": centers, "fluct_index_median": med, "samples": size})
     return Onset(
-        w_onset_mps=onset,
+        w_onset_mps=w0,
         uncertainty_mps=unc,
-        w_onset_n=onset / v_h,
+        w_onset_n=w0 / v_h,
         uncertainty_n=unc / v_h,
         v_h_mps=v_h,
         threshold_ratio=cfg.threshold_ratio,
-        max_speed_mps=float(w_use.max()),
+        max_speed_mps=w_top,
         samples=int(use.sum()),
-        bins=bins,
+        rise_ratio=rise,
+        bootstrap_sd_mps=boot_sd,
+        resolution_mps=resolution,
+        signals=tuple(signals),
+        bins=_bins(w_all[use], y, b0, b1, w0),
     )
+
+
+def _bins(w: np.ndarray, y: np.ndarray, b0: float, b1: float, w0: float, width: float = 0.05) -> pd.DataFrame:
+    b = np.floor(w / width).astype(np.int64)
+    g = pd.DataFrame({"b": b, "p": y}).groupby("b")["p"].agg(["mean", "size"])
+    centers = (g.index.to_numpy() + 0.5) * width
+    return pd.DataFrame({
+        "w_mps": centers, "power_mean": g["mean"].to_numpy(), "samples": g["size"].to_numpy(),
+        "power_fit": b0 + b1 * np.maximum(centers - w0, 0.0) ** 2,
+    })  # fmt: skip

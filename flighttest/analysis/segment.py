@@ -122,7 +122,9 @@ def find_descents(state: pd.DataFrame, cfg: SegmentConfig | None = None) -> tupl
 
     n_e, e = state["n_m"].to_numpy(float), state["e_m"].to_numpy(float)
     rows = []
-    for a, b in merged:
+    for k, (a, b) in enumerate(merged):
+        # a descent ends before the next one starts (an oscillating probe revisits old heights later)
+        limit = merged[k + 1][0] if k + 1 < len(merged) else len(t)
         before = (t >= t[a] - cfg.settle_window_s) & (t <= t[a])
         # the end height is measured half a window later: the tail of a descent is still creeping
         after = (t >= t[b] + 0.5 * cfg.settle_window_s) & (t <= t[b] + 1.5 * cfg.settle_window_s)
@@ -141,14 +143,19 @@ def find_descents(state: pd.DataFrame, cfg: SegmentConfig | None = None) -> tupl
             continue
         i0 = first + int(below[0])
         t0 = _crossing(t, h, i0, h0 - cfg.start_tol_m)
-        # end: first sample from which |h − h1| ≤ tol for settle_hold_s (or to the end of the log)
+        # end: first sample from which |h − h1| ≤ tol for settle_hold_s; unsettled descents end where
+        # they first reach the end band (or just before the next descent starts)
         hold_n = _samples(t, cfg.settle_hold_s)
-        inside = np.abs(h[i0:] - h1) <= cfg.end_tol_m
+        inside = np.abs(h[i0:limit] - h1) <= cfg.end_tol_m
         stay = pd.Series(inside[::-1]).rolling(hold_n, min_periods=1).min().to_numpy()[::-1].astype(bool)
         cand = np.flatnonzero(inside & stay)
-        i1 = i0 + int(cand[0]) if len(cand) else len(t) - 1
+        reached = np.flatnonzero(inside)
+        if len(cand):
+            i1 = i0 + int(cand[0])
+        else:
+            i1 = i0 + int(reached[0]) if len(reached) else max(limit - 1, i0)
         level = h1 + cfg.end_tol_m if h[i1 - 1] > h1 else h1 - cfg.end_tol_m
-        t1 = _crossing(t, h, i1, level) if len(cand) else float(t[i1])
+        t1 = _crossing(t, h, i1, level) if len(cand) or len(reached) else float(t[i1])
         span = slice(max(i0 - 1, 0), i1 + 1)
         horiz = np.hypot(n_e[span] - n_e[i0], e[span] - e[i0])
         rows.append(

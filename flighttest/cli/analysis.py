@@ -354,7 +354,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         source = (
             f"identified {today} by flighttest identify from probe log {Path(args.log).resolve()}: onset "
             f"{onset.w_onset_mps:.3f} ± {onset.uncertainty_mps:.3f} m/s ({onset.w_onset_n:.4f} v_h), "
-            f"fluctuation > {onset.threshold_ratio:g}× hover"
+            f"hinge fit of fluctuation power vs descent rate (rise {onset.rise_ratio:.1f}× hover)"
         )
         out["profile_written"] = str(write_w_allow(profile, onset.w_onset_mps, source))
     if args.json:
@@ -363,7 +363,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     console.print(
         f"VRS onset of {profile.name} from {args.log}: [bold]{onset.w_onset_mps:.3f} ± "
         f"{onset.uncertainty_mps:.3f} m/s[/] = {onset.w_onset_n:.4f} ± {onset.uncertainty_n:.4f} v_h "
-        f"(v_h {onset.v_h_mps:.2f} m/s; fluctuation > {onset.threshold_ratio:g}× hover; "
+        f"(v_h {onset.v_h_mps:.2f} m/s; hinge fit, fluctuation rises {onset.rise_ratio:.1f}× over hover; "
         f"{onset.samples} descending samples up to {onset.max_speed_mps:.2f} m/s)"
     )
     console.print(f"profile w_allow now: {profile.w_allow_mps:.3f} m/s ({profile.w_allow_source})")

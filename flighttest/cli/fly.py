@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import importlib.util
 import math
 import sys
@@ -41,6 +42,9 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
     p.add_argument("--height", type=float, metavar="H", help="start height above home in m (overrides the config)")
     p.add_argument("--min-alt", type=float, metavar="M", help="altitude floor in m (overrides the config)")
     p.add_argument("--geofence-radius", type=float, metavar="R", help="horizontal room around the start in m")
+    p.add_argument("--max-descent-speed", type=float, metavar="MPS",
+                   help="probe only: top descent speed of the sweep in m/s (default: the config's "
+                        "max_descent_mps, else max_descent_ratio × the profile's w_allow)")  # fmt: skip
     p.add_argument("--wind-ned", type=float, nargs=3, metavar=("N", "E", "D"),
                    help="wind in m/s NED for the guard when the vehicle reports none (default 0 0 0)")
     p.add_argument("--sysid", type=int, metavar="N", help="system id of the autopilot to fly when several answer")
@@ -103,6 +107,11 @@ def build_request(args: argparse.Namespace, mission: str | None = None, module: 
         overrides["land"] = False
     if overrides:
         cfg = cfg.with_flight(**overrides)
+    if args.max_descent_speed is not None:
+        _finite("--max-descent-speed", args.max_descent_speed)
+        if cfg.mission != "probe":
+            raise FlighttestError("--max-descent-speed applies to the probe mission only")
+        cfg = dataclasses.replace(cfg, plan={**cfg.plan, "max_descent_mps": args.max_descent_speed})
     if cfg.flight.start_height_m <= cfg.flight.min_alt_m:
         raise FlighttestError(
             f"start height {cfg.flight.start_height_m:g} m must exceed the altitude floor {cfg.flight.min_alt_m:g} m"

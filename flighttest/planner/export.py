@@ -10,7 +10,6 @@ from flighttest.aero import G_MPS2
 from flighttest.frames import quat_to_euler, quat_to_rotmat
 from flighttest.planner import helix as helix_mod
 from flighttest.planner import planar as planar_mod
-from flighttest.planner.ocp import rk4_resimulate
 from flighttest.planner.probe import ProbePlan
 from flighttest.planner.vertical import VerticalPlan
 from flighttest.trajectory import Trajectory
@@ -56,7 +55,7 @@ def planar_trajectory(
     acceleration and attitude are mutually consistent), written at 100 Hz.
     """
     r = sol.result
-    t, x, u = rk4_resimulate(planar_mod._dynamics_np, r.t_s, r.x[0], r.u, 1000.0)
+    t, x, u = planar_mod.resimulate(r, 1000.0)
     i = _decimate(t, OUTPUT_RATE_HZ)
     t, x, u = t[i], x[i], u[i]
     phi = x[:, planar_mod.IPHI]
@@ -90,7 +89,7 @@ def helix_trajectory(
     sol: helix_mod.HelixSolution, vehicle: str, mass_kg: float, extra: dict | None = None
 ) -> Trajectory:
     r = sol.result
-    t, x, u = rk4_resimulate(helix_mod._dynamics_np, r.t_s, r.x[0], r.u, 1000.0)
+    t, x, u = helix_mod.resimulate(r, 1000.0)
     i = _decimate(t, OUTPUT_RATE_HZ)
     t, x, u = t[i], x[i], u[i]
     q = x[:, 6:10] / np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)

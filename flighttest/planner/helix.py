@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
@@ -36,7 +36,15 @@ from flighttest.aero import G_MPS2
 from flighttest.errors import FlighttestError
 from flighttest.frames import quat_from_euler, quat_multiply, quat_to_rotmat
 from flighttest.planner.cone import VelocityConstraint
-from flighttest.planner.ocp import MinTimeOcp, OcpResult, OcpSpec, resample_guess, rk4_resimulate
+from flighttest.planner.ocp import (
+    MinTimeOcp,
+    OcpResult,
+    OcpSpec,
+    refined_mesh,
+    resample_guess,
+    rk4_resimulate_compiled,
+    violation_times,
+)
 from flighttest.profiles import VehicleProfile
 
 NX, NU = 10, 4
@@ -61,6 +69,8 @@ class HelixProblem:
     n_intervals: int = 80
     n_coarse: int = 40
     vehicle: str = ""
+    # descent-speed bound (m/s, NED v_D): PX4 clips offboard velocity setpoints to MPC_Z_VEL_MAX_DN
+    descent_max_mps: float | None = None
 
     def validate(self) -> None:
         for name, v in (("height", self.height_m), ("radius", self.radius_m), ("max speed", self.speed_max_mps),
@@ -77,6 +87,9 @@ class HelixProblem:
             raise FlighttestError("helix problem: wind must be finite")
         if self.n_intervals < 10 or self.n_coarse < 10:
             raise FlighttestError("helix problem: need at least 10 mesh intervals")
+        if self.descent_max_mps is not None and not (math.isfinite(self.descent_max_mps) and self.descent_max_mps > 0):
+            got = self.descent_max_mps
+            raise FlighttestError(f"helix problem: descent bound must be a positive number (got {got!r})")
 
     def summary(self) -> dict:
         return {
@@ -90,6 +103,7 @@ class HelixProblem:
             "accel_max_dps2": [math.degrees(a) for a in self.accel_max_rps2],
             "tilt_max_deg": math.degrees(self.tilt_max_rad),
             "speed_max_mps": self.speed_max_mps,
+            "descent_max_mps": self.descent_max_mps,
             "wind_ned_mps": list(self.wind_ned_mps),
             "n_intervals": self.n_intervals,
             **self.constraint.summary(),
@@ -108,10 +122,25 @@ def problem_for_vehicle(
     end_ne_m: tuple[float, float] = (0.0, 0.0),
     n_intervals: int = 80,
     n_coarse: int = 40,
+    *,
+    extra_margin_mps: float = 0.0,
+    tilt_margin_deg: float = 0.0,
+    rate_margin_dps: float = 0.0,
 ) -> HelixProblem:
-    """Bounds from a vehicle profile; thrust ≥ the rotors' minimum (never reversed)."""
+    """Bounds from a vehicle profile; thrust ≥ the rotors' minimum (never reversed).
+
+    Planning/tracking margins (keyword only, all ≥ 0, default 0): ``extra_margin_mps`` is added to
+    the constraint's margin (the plan keeps that much further inside the guard/cone bound than the
+    guard itself), ``tilt_margin_deg`` and ``rate_margin_dps`` derate the tilt and body-rate limits
+    (after ``tilt_max_deg`` / ``rate_max_dps`` and the profile's own limits are applied), leaving
+    the attitude controller room to track.
+    """
     if not 0 < thrust_fraction <= 1:
         raise FlighttestError(f"thrust fraction must lie in (0, 1] (got {thrust_fraction})")
+    for name, v in (("extra margin", extra_margin_mps), ("tilt margin", tilt_margin_deg),
+                    ("rate margin", rate_margin_dps)):  # fmt: skip
+        if not (math.isfinite(v) and v >= 0):
+            raise FlighttestError(f"helix problem: {name} must be a number ≥ 0 (got {v!r})")
     n = profile.n_rotors
     m = profile.mass_kg
     t_h = profile.hover_thrust_per_rotor_n
@@ -127,9 +156,15 @@ def problem_for_vehicle(
     rates = tuple(math.radians(r) for r in profile.max_rate_dps)
     if rate_max_dps is not None:
         rates = tuple(min(r, math.radians(rate_max_dps)) for r in rates)
+    rates = tuple(r - math.radians(rate_margin_dps) for r in rates)
     tilt = profile.max_tilt_deg if tilt_max_deg is None else min(tilt_max_deg, profile.max_tilt_deg)
+    tilt -= tilt_margin_deg
+    if not (tilt > 0 and min(rates) > 0):
+        raise FlighttestError("helix problem: the tilt and rate margins leave no tilt or rate to fly with")
     if constraint is None:
         constraint = VelocityConstraint(cone_deg=profile.vrs.cone_deg, margin_mps=profile.vrs.margin_mps)
+    if extra_margin_mps:
+        constraint = replace(constraint, margin_mps=constraint.margin_mps + extra_margin_mps)
     return HelixProblem(
         height_m=height_m,
         radius_m=radius_m,
@@ -208,6 +243,8 @@ def _spec(p: HelixProblem, n: int) -> OcpSpec:
     x_lb = np.array([-p.radius_m, -p.radius_m, -big, -vmax, -vmax, -vmax, -1.1, -1.1, -1.1, -1.1])
     x_ub = -x_lb
     x_ub[2] = big
+    if p.descent_max_mps is not None:
+        x_ub[5] = min(vmax, p.descent_max_mps)
     xf = np.array([p.end_ne_m[0], p.end_ne_m[1], p.height_m, 0, 0, 0, 0, 0, 0, 0])
     xf_lb, xf_ub = xf.copy(), xf.copy()
     xf_lb[[6, 9]], xf_ub[[6, 9]] = -1.1, 1.1  # yaw free at the end
@@ -322,8 +359,34 @@ class HelixSolution:
         return self.result.t_f_s
 
 
+def _attempt(r: OcpResult) -> dict:
+    return {"guess": r.guess, "status": r.status, "t_f_s": r.t_f_s, "solve_s": r.solve_s, "iterations": r.iterations}
+
+
+# What the 1 kHz re-simulation of the controls may exceed the limits by (between the mesh nodes).
+CONE_TOL_MPS = 1e-3
+TILT_TOL_DEG = 0.05
+RADIUS_TOL_M = 1e-3
+# Rates and thrust sit on their bounds up to IPOPT's bound relaxation (1e-8 relative).
+CONTROL_TOL_REL = 1e-6
+TIGHTEN_ROUNDS = 3
+# A round tightens a bound by this multiple of the overshoot it found (plus the tolerance), so one
+# round usually suffices even though the solution moves when the bound does.
+TIGHTEN_GAIN = 1.5
+
+
 def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
-    """Multi-start (helices of 1 and 2 turns, both ways) on a coarse mesh, best refined on the fine."""
+    """Multi-start (helices of 1 and 2 turns) on a coarse mesh, best refined on the fine mesh, then
+    bounds tightened where the 1 kHz re-simulation leaves them between nodes (≤ 3 rounds).
+
+    Path constraints hold at nodes and interval midpoints; between them the flown path can bulge
+    past a bound that the optimum rides (the tilt limit along the whole helix, the radius, the
+    cone). Each round re-simulates, measures the overshoot of tilt, radius and the cone and re-solves
+    (warm, same compiled NLP) with those constraints' lower bounds raised by ``TIGHTEN_GAIN`` × the
+    overshoot, until the re-simulation is within ``TILT_TOL_DEG``, ``RADIUS_TOL_M`` and
+    ``CONE_TOL_MPS``. Rates and thrust are controls, linear between nodes, so their box bounds hold
+    exactly on the re-simulation; the check reports them too.
+    """
     p.validate()
     t0 = time.perf_counter()
     coarse = MinTimeOcp(_spec(p, p.n_coarse), verbose=verbose)
@@ -334,49 +397,124 @@ def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
     for turns in (1.0, 2.0):
         xg, ug = helix_guess(p, p.n_coarse, turns, t_guess * (0.8 + 0.2 * turns))
         r = coarse.solve(t_guess, xg, ug, name=f"helix{turns:g}")
-        attempts.append({"guess": r.guess, "status": r.status, "t_f_s": r.t_f_s, "solve_s": r.solve_s,
-                         "iterations": r.iterations})  # fmt: skip
+        attempts.append(_attempt(r))
         if r.success and (best is None or r.t_f_s < best.t_f_s):
             best = r
         elif fallback is None or r.max_defect < fallback.max_defect:
             fallback = r
     final = best if best is not None else fallback
-    if best is not None and p.n_intervals != p.n_coarse:
-        fine = MinTimeOcp(_spec(p, p.n_intervals), verbose=verbose)
-        xg = resample_guess(best.t_s, best.x, p.n_intervals)
-        ug = resample_guess(best.t_s, best.u, p.n_intervals)
-        r = fine.solve(best.t_f_s, xg, ug, name=f"{best.guess} fine")
-        attempts.append({"guess": r.guess, "status": r.status, "t_f_s": r.t_f_s, "solve_s": r.solve_s,
-                         "iterations": r.iterations})  # fmt: skip
-        if r.success:
-            final = r
+    if best is not None:
+        fine = coarse if p.n_intervals == p.n_coarse else MinTimeOcp(_spec(p, p.n_intervals), verbose=verbose)
+        final = _fine_and_tighten(p, fine, best, attempts)
     sol = HelixSolution(problem=p, result=final, attempts=attempts, solve_s=0.0, check={})
     sol.check = resimulation_check(sol)
     sol.solve_s = time.perf_counter() - t0
     return sol
 
 
-def resimulation_check(sol: HelixSolution, rate_hz: float = 1000.0) -> dict:
-    r = sol.result
-    p = sol.problem
-    t, x, _ = rk4_resimulate(_dynamics_np, r.t_s, r.x[0], r.u, rate_hz)
-    w, u = blade_velocity_np(p, x)
-    margin = p.constraint.margin(w, u)
+def _fine_and_tighten(p: HelixProblem, fine: MinTimeOcp, start: OcpResult, attempts: list[dict]) -> OcpResult:
+    n = p.n_intervals
+    cos_tilt = math.cos(p.tilt_max_rad)
+    backoff = {"tilt_rad": 0.0, "radius_m": 0.0}
+    hot: list[float] = []
+    mesh = None
+    current = start
+    for round_ in range(TIGHTEN_ROUNDS + 1):
+        path_lb = np.array([
+            0.0,
+            p.radius_m**2 - (p.radius_m - backoff["radius_m"]) ** 2,
+            math.cos(max(p.tilt_max_rad - backoff["tilt_rad"], 0.0)) - cos_tilt,
+            0.0,
+        ])  # fmt: skip
+        xg = resample_guess(current.t_s, current.x, n, mesh)
+        ug = resample_guess(current.t_s, current.u, n, mesh)
+        label = f"{start.guess} fine" + (f" tighten{round_}" if round_ else "")
+        r = fine.solve(current.t_f_s, xg, ug, name=label, path_lb=path_lb, mesh=mesh)
+        attempts.append({**_attempt(r), "backoff": dict(backoff), "refined_at_s": list(hot)})
+        if not r.success:
+            break  # keep the last solution that converged (its check reports what it breaks)
+        current = r
+        over, t_re, margin = _overshoots(p, current)
+        if all(v <= 0 for v in over.values()) or round_ == TIGHTEN_ROUNDS:
+            break
+        for key, tol in (("tilt_deg", TILT_TOL_DEG), ("radius_m", RADIUS_TOL_M)):
+            if over[key] > 0:
+                step = TIGHTEN_GAIN * over[key] + tol
+                backoff["tilt_rad" if key == "tilt_deg" else key] += math.radians(step) if key == "tilt_deg" else step
+        if over["cone_mps"] > 0:
+            # The cone is tight at hover (w = u = 0), so it cannot be tightened uniformly: crowd the
+            # nodes where it breaks instead, as the planar solver does.
+            hot.extend(violation_times(t_re, margin, CONE_TOL_MPS))
+            mesh = refined_mesh(np.linspace(0.0, current.t_f_s, n + 1), np.array(hot))
+    return current
+
+
+def _overshoots(p: HelixProblem, r: OcpResult):
+    """How far the 1 kHz re-simulation exceeds each bound beyond its tolerance (≤ 0: fine), and the
+    re-simulated cone margin over time."""
+    c, t, margin = _resim_figures(p, r, with_margin=True)
+    over = {
+        "cone_mps": -c["worst_margin_mps"] - CONE_TOL_MPS,
+        "tilt_deg": c["max_tilt_deg"] - math.degrees(p.tilt_max_rad) - TILT_TOL_DEG,
+        "radius_m": c["max_radius_m"] - p.radius_m - RADIUS_TOL_M,
+    }
+    return over, t, margin
+
+
+def resimulate(r: OcpResult, rate_hz: float = 1000.0):
+    """``(t, x, u)`` of the solution's controls integrated from its first state at ``rate_hz``."""
+    return rk4_resimulate_compiled(dynamics, r.t_s, r.x[0], r.u, rate_hz)
+
+
+def _resim_figures(p: HelixProblem, r: OcpResult, rate_hz: float = 1000.0, with_margin: bool = False):
+    t, x, u = resimulate(r, rate_hz)
+    w, u_air = blade_velocity_np(p, x)
+    margin = p.constraint.margin(w, u_air)
     i = int(np.argmin(margin))
     radius = np.hypot(x[:, 0], x[:, 1])
-    r33 = 1 - 2 * (x[:, 7] ** 2 + x[:, 8] ** 2)
-    w_n, u_n = blade_velocity_np(p, r.x)
-    return {
+    q = x[:, 6:10] / np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
+    r33 = 1 - 2 * (q[:, 1] ** 2 + q[:, 2] ** 2)
+    figures = {
         "rate_hz": rate_hz,
         "worst_margin_mps": float(margin[i]),
         "worst_margin_t_s": float(t[i]),
-        "node_worst_margin_mps": float(np.min(p.constraint.margin(w_n, u_n))),
         "max_radius_m": float(radius.max()),
         "max_tilt_deg": float(np.degrees(np.arccos(np.clip(r33, -1, 1))).max()),
+        "max_rate_dps": float(np.degrees(np.abs(u[:, 1:]).max())),
+        "min_thrust_mps2": float(u[:, 0].min()),
+        "max_thrust_mps2": float(u[:, 0].max()),
+        "max_speed_mps": float(np.linalg.norm(x[:, 3:6], axis=1).max()),
+        "max_descent_mps": float(x[:, 5].max()),
         "end_position_error_m": float(np.linalg.norm(x[-1, :3] - [*p.end_ne_m, p.height_m])),
         "end_speed_mps": float(np.linalg.norm(x[-1, 3:6])),
-        "turns": float(_turns(r.x)),
     }
+    return (figures, t, margin) if with_margin else figures
+
+
+def resimulation_check(sol: HelixSolution, rate_hz: float = 1000.0) -> dict:
+    """Figures of the 1 kHz re-simulation with the interpolated controls (what would be flown),
+    the tolerances they are held to and whether each limit holds (``limits_ok``)."""
+    r = sol.result
+    p = sol.problem
+    c = _resim_figures(p, r, rate_hz)
+    w_n, u_n = blade_velocity_np(p, r.x)
+    tol = {"cone_mps": CONE_TOL_MPS, "tilt_deg": TILT_TOL_DEG, "radius_m": RADIUS_TOL_M,
+           "controls_rel": CONTROL_TOL_REL}  # fmt: skip
+    rate_lim = math.degrees(max(p.rate_max_rps))
+    c.update({
+        "node_worst_margin_mps": float(np.min(p.constraint.margin(w_n, u_n))),
+        "turns": float(_turns(r.x)),
+        "tolerances": tol,
+        "limits_ok": bool(
+            c["worst_margin_mps"] >= -CONE_TOL_MPS
+            and c["max_tilt_deg"] <= math.degrees(p.tilt_max_rad) + TILT_TOL_DEG
+            and c["max_radius_m"] <= p.radius_m + RADIUS_TOL_M
+            and c["max_rate_dps"] <= rate_lim * (1 + CONTROL_TOL_REL)
+            and p.f_min_mps2 - CONTROL_TOL_REL * p.f_max_mps2 <= c["min_thrust_mps2"]
+            and c["max_thrust_mps2"] <= p.f_max_mps2 * (1 + CONTROL_TOL_REL)
+        ),
+    })  # fmt: skip
+    return c
 
 
 def _turns(x: np.ndarray) -> float:

@@ -123,6 +123,7 @@ class MinTimeOcp:
             f_end = fmap(x1s, u1s)
             x_mid = 0.5 * (x0s + x1s) + hx / 8 * (k1 - f_end)
             g_mid = pfun.map(n)(x_mid, um)
+            self._path_rows = slice(s.nx * n, s.nx * n + len(s.path_lb) * (2 * n + 1))
             g_list += [ca.vec(g_nodes), ca.vec(g_mid)]
             lbg += [np.tile(s.path_lb, n + 1), np.tile(s.path_lb, n)]
             ubg += [np.tile(s.path_ub, n + 1), np.tile(s.path_ub, n)]
@@ -180,10 +181,11 @@ class MinTimeOcp:
 
     def solve(self, t_guess: float, x_guess: np.ndarray, u_guess: np.ndarray, name: str = "",
               xf_lb: np.ndarray | None = None, xf_ub: np.ndarray | None = None,
-              mesh: np.ndarray | None = None) -> OcpResult:  # fmt: skip
+              mesh: np.ndarray | None = None, path_lb: np.ndarray | None = None) -> OcpResult:  # fmt: skip
         """Solve from a guess: ``x_guess`` (N+1, nx), ``u_guess`` (N+1, nu) on the nodes of ``mesh``
         (interval fractions of T summing to 1; uniform by default); optionally other final state
-        bounds than the spec's (e.g. another turn of a flip) on the same NLP."""
+        bounds than the spec's (e.g. another turn of a flip) or other lower bounds of the path
+        constraints (tightened to keep the flown path inside between nodes) on the same NLP."""
         s = self.spec
         n = s.n_intervals
         mesh = np.full(n, 1.0 / n) if mesh is None else np.asarray(mesh, float) / np.sum(mesh)
@@ -197,7 +199,11 @@ class MinTimeOcp:
                              np.asarray(u_guess).T.flatten(order="F")])  # fmt: skip
         z0 = np.clip(z0, lbz, ubz)
         t0 = time.perf_counter()
-        sol = self.solver(x0=z0, p=mesh, lbx=lbz, ubx=ubz, lbg=self.lbg, ubg=self.ubg)
+        lbg = self.lbg
+        if path_lb is not None:
+            lbg = lbg.copy()
+            lbg[self._path_rows] = np.tile(np.asarray(path_lb, float), 2 * n + 1)
+        sol = self.solver(x0=z0, p=mesh, lbx=lbz, ubx=ubz, lbg=lbg, ubg=self.ubg)
         solve_s = time.perf_counter() - t0
         stats = self.solver.stats()
         z = np.asarray(sol["x"]).ravel()
@@ -249,13 +255,8 @@ def refined_mesh(t_nodes: np.ndarray, t_hot: np.ndarray, gain: float = 6.0) -> n
     return np.diff(nodes) / t_f
 
 
-def rk4_resimulate(dynamics_np: Callable[[np.ndarray, np.ndarray], np.ndarray], t_nodes: np.ndarray,
-                   x0: np.ndarray, u_nodes: np.ndarray, rate_hz: float = 1000.0):  # fmt: skip
-    """Integrate ``ẋ = f(x, u)`` from ``x0`` with the linearly interpolated controls at ``rate_hz``.
-
-    Returns ``(t, x, u)`` on the fine clock. This is an independent check of a solution: it does not
-    use the solver's states at all, only its controls.
-    """
+def _fine_clock(t_nodes: np.ndarray, u_nodes: np.ndarray, rate_hz: float):
+    """The re-simulation clock and the linearly interpolated controls at its steps and midpoints."""
     t_f = float(t_nodes[-1])
     n = max(int(np.ceil(t_f * rate_hz)), 1)
     t = np.linspace(0.0, t_f, n + 1)
@@ -264,8 +265,29 @@ def rk4_resimulate(dynamics_np: Callable[[np.ndarray, np.ndarray], np.ndarray], 
     def u_at(tt):
         return np.stack([np.interp(tt, t_nodes, u_nodes[:, j]) for j in range(u_nodes.shape[1])], -1)
 
-    u = u_at(t)
-    um = u_at(t[:-1] + 0.5 * h)
+    return t, h, u_at(t), u_at(t[:-1] + 0.5 * h)
+
+
+def violation_times(t: np.ndarray, margin: np.ndarray, tol: float) -> list[float]:
+    """Times of the worst point of every stretch where ``margin < −tol``."""
+    bad = margin < -tol
+    out = []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(int), [0]])))
+    for a, b in zip(edges[::2], edges[1::2]):
+        out.append(float(t[a + int(np.argmin(margin[a:b]))]))
+    return out
+
+
+def rk4_resimulate(dynamics_np: Callable[[np.ndarray, np.ndarray], np.ndarray], t_nodes: np.ndarray,
+                   x0: np.ndarray, u_nodes: np.ndarray, rate_hz: float = 1000.0):  # fmt: skip
+    """Integrate ``ẋ = f(x, u)`` from ``x0`` with the linearly interpolated controls at ``rate_hz``.
+
+    Returns ``(t, x, u)`` on the fine clock. This is an independent check of a solution: it does not
+    use the solver's states at all, only its controls. Plain numpy, one Python step at a time: the
+    reference that ``rk4_resimulate_compiled`` (what the planners use, ~30× faster) is tested against.
+    """
+    t, h, u, um = _fine_clock(t_nodes, u_nodes, rate_hz)
+    n = len(t) - 1
     x = np.empty((n + 1, len(x0)))
     x[0] = x0
     for i in range(n):
@@ -276,3 +298,48 @@ def rk4_resimulate(dynamics_np: Callable[[np.ndarray, np.ndarray], np.ndarray], 
         k4 = dynamics_np(xi + h * k3, u[i + 1])
         x[i + 1] = xi + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     return t, x, u
+
+
+_RK4_CHUNK = 1000
+_RK4_STEPPERS: dict[tuple, ca.Function] = {}
+
+
+def _rk4_stepper(dynamics: Dynamics, nx: int, nu: int) -> ca.Function:
+    """``_RK4_CHUNK`` chained RK4 steps of ``ẋ = dynamics(x, u)`` as one compiled CasADi function
+    ``x_end_all = F(x0, [u0; u_mid; u1; h] per step)``, built once per dynamics."""
+    key = (dynamics, nx, nu)
+    if key not in _RK4_STEPPERS:
+        x = ca.SX.sym("x", nx)
+        u0, um, u1 = ca.SX.sym("u0", nu), ca.SX.sym("um", nu), ca.SX.sym("u1", nu)
+        h = ca.SX.sym("h")
+        f = ca.Function("f", [x, u0], [dynamics(x, u0)])
+        k1 = f(x, u0)
+        k2 = f(x + 0.5 * h * k1, um)
+        k3 = f(x + 0.5 * h * k2, um)
+        k4 = f(x + h * k3, u1)
+        step = ca.Function("rk4", [x, ca.vertcat(u0, um, u1, h)], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+        _RK4_STEPPERS[key] = step.mapaccum(_RK4_CHUNK)
+    return _RK4_STEPPERS[key]
+
+
+def rk4_resimulate_compiled(dynamics: Dynamics, t_nodes: np.ndarray, x0: np.ndarray, u_nodes: np.ndarray,
+                            rate_hz: float = 1000.0):  # fmt: skip
+    """``rk4_resimulate`` with the same steps evaluated by CasADi's virtual machine (``dynamics`` on
+    CasADi symbols, as the NLP has it); steps run in chunks, the last padded with ``h = 0`` steps
+    that leave the state unchanged."""
+    t, h, u, um = _fine_clock(t_nodes, u_nodes, rate_hz)
+    n = len(t) - 1
+    nx, nu = len(x0), u.shape[1]
+    chunks = -(-n // _RK4_CHUNK)
+    inputs = np.zeros((3 * nu + 1, chunks * _RK4_CHUNK))
+    inputs[:nu, :n] = u[:-1].T
+    inputs[nu : 2 * nu, :n] = um.T
+    inputs[2 * nu : 3 * nu, :n] = u[1:].T
+    inputs[3 * nu, :n] = h
+    stepper = _rk4_stepper(dynamics, nx, nu)
+    x = np.empty((chunks * _RK4_CHUNK + 1, nx))
+    x[0] = x0
+    for c in range(chunks):
+        sl = slice(c * _RK4_CHUNK, (c + 1) * _RK4_CHUNK)
+        x[sl.start + 1 : sl.stop + 1] = np.asarray(stepper(x[sl.start], inputs[:, sl])).T
+    return t, x[: n + 1], u

@@ -10,8 +10,11 @@ which goes down by at most A and comes back up to the start on every cycle, so t
 climbs above its start point and the depth budget is exactly A (the altitude floor sets it). Its
 frequency still grows linearly (``ω0·t²`` has rate ``2ω0·t``) and the peak descent speed of each
 cycle grows with time (``≈ A·ω0·t``). The ramp ``r`` starts the motion at zero velocity and
-acceleration. The reference ends at the end of the last whole cycle (back at the start point, at
-rest) whose descent speed stays below the cap, or before ``duration``.
+acceleration. Once a cycle's peak would pass the speed cap (or its acceleration the vehicle's), the
+frequency stops growing: the sweep reaches the cap instead of stopping a whole cycle short of it
+(with few, deep cycles that gap is large: a probe capped at 1.5 m/s could end at 1.1 m/s and never
+see an onset at 1.2 m/s), and flies ``hold_cycles`` more cycles at that top speed. The reference ends
+at the end of a whole cycle (back at the start point, at rest), and before ``duration``.
 
 Output includes, for each descent speed on a grid, the time it is first reached (sidecar key
 ``speed_first_reached``), so the analysis can relate the onset of fluctuations to a speed.
@@ -43,11 +46,13 @@ class ProbePlan:
 def plan_probe(amplitude_m: float = 2.0, omega0_rps2: float = 0.05, ramp_s: float = 3.0,
                max_descent_mps: float = 3.0, duration_s: float = 60.0, start_alt_m: float = 10.0,
                floor_alt_m: float = 2.0, speed_step_mps: float = 0.1, rate_hz: float = 100.0,
-               max_accel_down_mps2: float = math.inf, max_accel_up_mps2: float = math.inf) -> ProbePlan:  # fmt: skip
+               max_accel_down_mps2: float = math.inf, max_accel_up_mps2: float = math.inf,
+               hold_cycles: int = 2) -> ProbePlan:  # fmt: skip
     """The probe reference sampled at ``rate_hz``; ω0 in rad/s² (phase ``ω0·t²``).
 
-    It also ends before its acceleration exceeds the vehicle's (``max_accel_*``, positive numbers):
-    as the frequency grows, the acceleration grows faster than the speed.
+    Its frequency stops growing where the peak speed reaches the cap or the acceleration the
+    vehicle's (``max_accel_*``, positive numbers: as the frequency grows, the acceleration grows
+    faster than the speed); ``hold_cycles`` whole cycles are flown at that frequency.
     """
     for name, v in (("amplitude", amplitude_m), ("omega0", omega0_rps2), ("ramp", ramp_s),
                     ("max descent speed", max_descent_mps), ("duration", duration_s),
@@ -62,20 +67,32 @@ def plan_probe(amplitude_m: float = 2.0, omega0_rps2: float = 0.05, ramp_s: floa
             f"probe: amplitude {amplitude_m:g} m would go below the altitude floor ({floor_alt_m:g} m; start at "
             f"{start_alt_m:g} m leaves {room:g} m)"
         )
+    if int(hold_cycles) != hold_cycles or hold_cycles < 0:
+        raise FlighttestError(f"probe: hold cycles must be a whole number ≥ 0 (got {hold_cycles!r})")
     t = np.arange(0.0, duration_s + 0.5 / rate_hz, 1.0 / rate_hz)
-    d, v, a = _profile(t, amplitude_m, omega0_rps2, ramp_s)
-    over = np.flatnonzero((v > max_descent_mps) | (a > max_accel_down_mps2) | (-a > max_accel_up_mps2))
+    # the frequency φ' = A·v/2 at which a cycle peaks at the cap (steady: v = A/2·φ'·sin φ,
+    # a = A/2·φ'²·cos φ), a little below so the chirp's own φ'' keeps it inside; then checked
+    a_lim = min(max_accel_down_mps2, max_accel_up_mps2)
+    rate_sat = 0.98 * min(2.0 * max_descent_mps / amplitude_m, math.sqrt(2.0 * a_lim / amplitude_m))
+    for _ in range(50):
+        d, v, a = _profile(t, amplitude_m, omega0_rps2, ramp_s, rate_sat)
+        over = np.flatnonzero((v > max_descent_mps) | (a > max_accel_down_mps2) | (-a > max_accel_up_mps2))
+        if not len(over) or t[over[0]] >= ramp_s + 2 * math.pi / rate_sat:
+            break
+        rate_sat *= 0.98  # the ramp's own acceleration: slow the saturated sweep until it fits
     t_limit = t[over[0]] if len(over) else duration_s
-    # Whole cycles end where ω0·t² = 2πk (back at the start with zero velocity once the ramp is done).
-    k = math.floor(omega0_rps2 * t_limit**2 / (2 * math.pi) + 1e-12)
-    t_end = math.sqrt(2 * math.pi * k / omega0_rps2) if k > 0 else 0.0
+    t_sat = rate_sat / (2 * omega0_rps2)  # the frequency stops growing here
+    k_sat = math.ceil(_phase(t_sat, omega0_rps2, rate_sat) / (2 * math.pi) - 1e-9)
+    # whole cycles end where the phase is 2πk (back at the start with zero velocity after the ramp)
+    k = min(math.floor(_phase(t_limit, omega0_rps2, rate_sat) / (2 * math.pi) + 1e-12), k_sat + int(hold_cycles))
+    t_end = _phase_time(2 * math.pi * k, omega0_rps2, rate_sat) if k > 0 else 0.0
     if k < 1 or t_end < ramp_s:
         raise FlighttestError(
             "probe: not one whole cycle after the ramp fits within the speed cap, the acceleration limits "
             "and the duration (raise --duration or --max-descent-speed, or lower --omega0 / --ramp)"
         )
     t = np.union1d(t[t < t_end], [t_end])
-    d, v, a = _profile(t, amplitude_m, omega0_rps2, ramp_s)
+    d, v, a = _profile(t, amplitude_m, omega0_rps2, ramp_s, rate_sat)
     d[-1] = v[-1] = 0.0
     firsts = []
     top = float(v.max())
@@ -91,22 +108,42 @@ def plan_probe(amplitude_m: float = 2.0, omega0_rps2: float = 0.05, ramp_s: floa
         "start_alt_m": start_alt_m,
         "floor_alt_m": floor_alt_m,
         "speed_step_mps": speed_step_mps,
+        "hold_cycles": int(hold_cycles),
+        "saturated_rate_rps": rate_sat,
+        "saturated_from_s": min(t_sat, float(t_end)),
         "max_accel_down_mps2": max_accel_down_mps2 if math.isfinite(max_accel_down_mps2) else None,
         "max_accel_up_mps2": max_accel_up_mps2 if math.isfinite(max_accel_up_mps2) else None,
-        "formula": "d = smoothstep(t/ramp) * A/2 * (1 - cos(omega0 t^2)) (NED down, one-sided)",
+        "formula": "d = smoothstep(t/ramp) * A/2 * (1 - cos(phi)), phi' = min(2 omega0 t, saturated_rate) "
+                   "(NED down, one-sided)",
     }
     return ProbePlan(t, d, v, a, float(t_end), k, top, firsts, problem)
 
 
-def _profile(t: np.ndarray, amp: float, om0: float, ramp: float):
+def _phase(t, om0: float, rate_sat: float):
+    """``φ(t)``: ``ω0·t²`` until its rate ``2ω0·t`` reaches ``rate_sat``, then linear."""
+    t_sat = rate_sat / (2 * om0)
+    return np.where(t < t_sat, om0 * np.square(t), om0 * t_sat**2 + rate_sat * (t - t_sat))
+
+
+def _phase_time(phase: float, om0: float, rate_sat: float) -> float:
+    t_sat = rate_sat / (2 * om0)
+    if phase <= om0 * t_sat**2:
+        return math.sqrt(phase / om0)
+    return t_sat + (phase - om0 * t_sat**2) / rate_sat
+
+
+def _profile(t: np.ndarray, amp: float, om0: float, ramp: float, rate_sat: float = math.inf):
     """``d, ḋ, d̈`` of the ramped one-sided chirp (analytic derivatives)."""
     s = np.clip(t / ramp, 0.0, 1.0)
     inside = (t < ramp).astype(float)
     r = 3 * s**2 - 2 * s**3
     r1 = inside * 6 * s * (1 - s) / ramp
     r2 = inside * (6 - 12 * s) / ramp**2
-    ph = om0 * t**2
+    chirping = 2 * om0 * t < rate_sat
+    ph = _phase(t, om0, rate_sat) if math.isfinite(rate_sat) else om0 * t**2
+    ph1 = np.where(chirping, 2 * om0 * t, rate_sat)
+    ph2 = np.where(chirping, 2 * om0, 0.0)
     g = 0.5 * amp * (1 - np.cos(ph))
-    g1 = amp * om0 * t * np.sin(ph)
-    g2 = amp * om0 * (np.sin(ph) + 2 * ph * np.cos(ph))
+    g1 = 0.5 * amp * ph1 * np.sin(ph)
+    g2 = 0.5 * amp * (ph2 * np.sin(ph) + ph1**2 * np.cos(ph))
     return r * g, r1 * g + r * g1, r2 * g + 2 * r1 * g1 + r * g2

@@ -1,0 +1,163 @@
+"""Preflight decisions (pure): what passes, what warns, what stops a mission before arming."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from flighttest import preflight as pf
+from flighttest.link import TelemetryState
+from flighttest.planner.export import vertical_trajectory
+from flighttest.planner.vertical import plan_vertical
+from flighttest.profiles import load_profile
+
+X500 = load_profile("x500")
+REGION = X500.guard_region()
+
+
+def _vertical(height_m=3.0, w_allow=None, margin=0.25):
+    plan = plan_vertical(X500, height_m=height_m, w_allow_mps=w_allow, margin_mps=margin, accel_fraction=0.5)
+    return vertical_trajectory(plan, "x500", X500.mass_kg)
+
+
+def _by_name(checks) -> dict[str, pf.Check]:
+    return {c.name: c for c in checks}
+
+
+def test_trajectory_stats_of_a_vertical_descent():
+    traj = _vertical(3.0)
+    st = pf.trajectory_stats(traj, REGION, arrest_accel_mps2=3.0)
+    assert st.depth_max_m == pytest.approx(3.0)
+    assert st.radius_max_m == pytest.approx(0.0)
+    cruise = X500.w_allow_mps - 0.25
+    assert st.descent_max_mps == pytest.approx(cruise) and st.speed_max_mps == pytest.approx(cruise)
+    assert st.duration_s == pytest.approx(traj.duration_s)
+    # level, no wind: w = v_D, so the margin is the guard's bound minus the cruise speed
+    assert st.guard_margin_min_mps == pytest.approx(0.25 - X500.vrs.margin_mps, abs=1e-6)
+    # arresting a sink of v at 3 m/s² costs v²/6 of height below where it starts
+    assert st.arrest_floor_m == pytest.approx(-3.0, abs=cruise**2 / 6 + 1e-6)
+    assert st.arrest_floor_m < -3.0 + 1e-9
+
+
+@pytest.mark.parametrize(("start", "floor", "status"), [(5.0, 1.0, pf.PASS), (4.0, 1.0, pf.PASS), (3.5, 1.0, pf.FAIL)])
+def test_height_check(start, floor, status):
+    st = pf.trajectory_stats(_vertical(3.0), REGION, 3.0)
+    checks = _by_name(pf.trajectory_checks(st, X500, start, floor, geofence_radius_m=10.0))
+    assert checks["height"].status == status
+    assert checks["height"].value == f"start {start:.2f} m, lowest point {start - 3.0:.2f} m"
+
+
+def test_arresting_the_sink_needs_room_below_the_lowest_point():
+    st = pf.trajectory_stats(_vertical(3.0), REGION, arrest_accel_mps2=0.5)  # a weak brake
+    checks = _by_name(pf.trajectory_checks(st, X500, 4.0, 1.0, 10.0))
+    assert checks["height"].status == pf.PASS
+    assert checks["height to arrest the sink"].status == pf.FAIL
+
+
+def test_horizontal_room_counts_the_recovery_escape():
+    st = pf.trajectory_stats(_vertical(3.0), REGION, 3.0)
+    def room(radius_m: float) -> str:
+        checks = pf.trajectory_checks(st, X500, 5.0, 1.0, radius_m, recovery_room_m=1.0)
+        return _by_name(checks)["horizontal room"].status
+
+    assert (room(1.5), room(0.5)) == (pf.PASS, pf.FAIL)
+
+
+def test_a_plan_inside_the_guard_region_warns_and_says_what_happens():
+    st = pf.trajectory_stats(_vertical(3.0, w_allow=2 * X500.w_allow_mps, margin=0.0), REGION, 3.0)
+    assert st.guard_margin_min_mps < -0.5
+    c = _by_name(pf.trajectory_checks(st, X500, 5.0, 1.0, 10.0))["plan vs guard region"]
+    assert c.status == pf.WARN and "the guard will abort" in c.value
+    c = _by_name(pf.trajectory_checks(st, X500, 5.0, 1.0, 10.0, observe_region=True))["plan vs guard region"]
+    assert c.status == pf.WARN and "observed only" in c.value
+
+
+def _healthy_state() -> TelemetryState:
+    st = TelemetryState(n_m=0.0, e_m=0.0, d_m=0.0, vn_mps=0.0, ve_mps=0.0, vd_mps=0.0, q=(1.0, 0.0, 0.0, 0.0),
+                        battery_percent=0.9, battery_v=16.4, landed_state="ON_GROUND",
+                        health={"is_local_position_ok": True, "is_home_position_ok": True,
+                                "is_armable": True})  # fmt: skip
+    for stream in ("posvel", "attitude"):
+        for i in range(51):
+            st.count(stream, 100.0 + i * 0.02)
+    return st
+
+
+def test_vehicle_checks_pass_a_healthy_vehicle_on_the_ground():
+    checks = pf.vehicle_checks(_healthy_state(), now_s=101.0, telemetry_hz=50.0, min_battery_percent=30.0)
+    assert [c.status for c in checks] == [pf.PASS] * 5
+    assert _by_name(checks)["battery"].value == "90 %, 16.40 V"  # MAVSDK reports a fraction
+
+
+@pytest.mark.parametrize(
+    ("change", "failing"),
+    [
+        (lambda st: setattr(st, "connected", False), "link and telemetry rate"),
+        (lambda st: st.counts.update(posvel=20), "link and telemetry rate"),  # 20 Hz < 0.8 × 50 Hz
+        (lambda st: st.health.update(is_armable=False), "health"),
+        (lambda st: setattr(st, "health", {}), ("health", "estimator")),
+        (lambda st: setattr(st, "vn_mps", math.nan), "estimator"),
+        (lambda st: st.health.update(is_home_position_ok=False), ("health", "estimator")),
+        (lambda st: setattr(st, "battery_percent", 0.2), "battery"),
+        (lambda st: setattr(st, "armed", True), "on the ground, disarmed"),
+        (lambda st: setattr(st, "landed_state", "IN_AIR"), "on the ground, disarmed"),
+    ],
+)
+def test_vehicle_checks_fail_with_the_reason(change, failing):
+    st = _healthy_state()
+    change(st)
+    result = pf.PreflightResult(pf.vehicle_checks(st, 101.0, 50.0, 30.0))
+    assert not result.ok
+    names = failing if isinstance(failing, tuple) else (failing,)
+    assert tuple(c.name for c in result.failures) == names
+    assert result.first_failure().startswith(f"{names[0]}: ")
+
+
+def test_an_unreported_battery_warns_but_does_not_stop():
+    st = _healthy_state()
+    st.battery_percent = math.nan
+    c = _by_name(pf.vehicle_checks(st, 101.0, 50.0, 30.0))["battery"]
+    assert c.status == pf.WARN
+
+
+PX4_DEFAULTS = {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0, "COM_RC_OVERRIDE": 1, "MPC_Z_VEL_MAX_DN": 1.5}
+
+
+def test_param_checks_on_px4_defaults():
+    checks = _by_name(pf.param_checks(PX4_DEFAULTS, descent_max_mps=1.3, w_allow_mps=0.85))
+    assert checks["COM_OF_LOSS_T"].status == pf.PASS
+    assert checks["COM_OBL_RC_ACT"].status == pf.PASS and checks["COM_OBL_RC_ACT"].value == "0 = Position"
+    # PX4's default lets sticks take over only in position modes, not offboard: worth a warning
+    assert checks["COM_RC_OVERRIDE"].status == pf.WARN
+    assert checks["MPC_Z_VEL_MAX_DN"].status == pf.PASS
+    assert checks["PX4 descents after an abort"].status == pf.WARN
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "status"),
+    [
+        ("COM_OF_LOSS_T", 5.0, pf.FAIL),
+        ("COM_OF_LOSS_T", 0.0, pf.FAIL),
+        ("COM_OBL_RC_ACT", 4, pf.PASS),  # Land
+        ("COM_OBL_RC_ACT", 7, pf.FAIL),  # Disarm: drops the vehicle
+        ("COM_OBL_RC_ACT", 6, pf.FAIL),  # Terminate
+        ("COM_OBL_RC_ACT", 42, pf.FAIL),  # unknown
+        ("COM_RC_OVERRIDE", 3, pf.PASS),
+        ("MPC_Z_VEL_MAX_DN", 1.0, pf.FAIL),  # PX4 would clip the planned 1.3 m/s descent
+        ("MPC_Z_VEL_MAX_DN", None, pf.WARN),
+        ("COM_OF_LOSS_T", None, pf.WARN),
+    ],
+)
+def test_param_checks_decide_each_parameter(name, value, status):
+    params = {**PX4_DEFAULTS, name: value}
+    assert _by_name(pf.param_checks(params, 1.3, 0.85))[name].status == status
+
+
+def test_preflight_result_summary():
+    res = pf.PreflightResult([pf.Check("a", pf.PASS, "1", "r"), pf.Check("b", pf.WARN, "2", "r"),
+                              pf.Check("c", pf.FAIL, "3", "≥ 4")])  # fmt: skip
+    assert not res.ok and res.first_failure() == "c: 3 (needs ≥ 4)"
+    d = res.to_dict()
+    assert d["ok"] is False and [c["status"] for c in d["checks"]] == ["pass", "warn", "fail"]
+    assert pf.PreflightResult([pf.Check("a", pf.WARN, "", "")]).ok
