@@ -40,6 +40,7 @@ from flighttest.planner.ocp import (
     MinTimeOcp,
     OcpResult,
     OcpSpec,
+    SolvedOcp,
     refined_mesh,
     resample_guess,
     rk4_resimulate_compiled,
@@ -339,24 +340,12 @@ def helix_guess(p: HelixProblem, n: int, turns: float, t_f: float, direction: in
 
 
 @dataclass
-class HelixSolution:
+class HelixSolution(SolvedOcp):
     problem: HelixProblem
     result: OcpResult
     attempts: list[dict]
     solve_s: float
     check: dict
-
-    @property
-    def success(self) -> bool:
-        return self.result.success
-
-    @property
-    def status(self) -> str:
-        return "optimal" if self.result.success else self.result.status
-
-    @property
-    def t_f_s(self) -> float:
-        return self.result.t_f_s
 
 
 def _attempt(r: OcpResult) -> dict:

@@ -81,6 +81,24 @@ class OcpResult:
     guess: str = ""
 
 
+class SolvedOcp:
+    """What every planner's solution says about its solve; the dataclass provides ``result``."""
+
+    result: OcpResult
+
+    @property
+    def success(self) -> bool:
+        return self.result.success
+
+    @property
+    def status(self) -> str:
+        return "optimal" if self.result.success else self.result.status
+
+    @property
+    def t_f_s(self) -> float:
+        return self.result.t_f_s
+
+
 class MinTimeOcp:
     """The transcribed NLP of one ``OcpSpec``; ``solve()`` it from any initial guess."""
 

@@ -34,6 +34,7 @@ from flighttest.planner.ocp import (
     MinTimeOcp,
     OcpResult,
     OcpSpec,
+    SolvedOcp,
     refined_mesh,
     resample_guess,
     rk4_resimulate_compiled,
@@ -130,24 +131,12 @@ def resimulate(r: OcpResult, rate_hz: float = 1000.0):
 
 
 @dataclass
-class PlanarSolution:
+class PlanarSolution(SolvedOcp):
     problem: PlanarProblem
     result: OcpResult
     attempts: list[dict]
     solve_s: float
     check: dict  # fine re-simulation figures
-
-    @property
-    def success(self) -> bool:
-        return self.result.success
-
-    @property
-    def status(self) -> str:
-        return "optimal" if self.result.success else self.result.status
-
-    @property
-    def t_f_s(self) -> float:
-        return self.result.t_f_s
 
     def blade_velocity(self, x: np.ndarray | None = None):
         x = self.result.x if x is None else x
