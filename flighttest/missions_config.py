@@ -18,12 +18,12 @@ and the key.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 from flighttest.errors import FlighttestError
+from flighttest.tomlfile import read_toml
 
 MISSION_KINDS = ("probe", "helix", "vertical", "file")
 
@@ -158,12 +158,5 @@ def mission_config_from_dict(data: dict[str, Any], path: str = "<config>") -> Mi
 
 def load_mission_config(path: Path | str) -> MissionConfig:
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FlighttestError(f"{path}: cannot read mission config ({exc.strerror})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise FlighttestError(f"{path}: malformed TOML ({exc})") from None
+    data = read_toml(path, "mission config")
     return mission_config_from_dict(data, str(path))

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ import tomli_w
 from flighttest import aero
 from flighttest.errors import FlighttestError
 from flighttest.frames import GuardRegion
+from flighttest.tomlfile import read_toml
 
 SHIPPED_DIR = Path(__file__).with_name("profiles")
 
@@ -247,14 +247,7 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
 
 def load_profile_file(path: Path | str) -> VehicleProfile:
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FlighttestError(f"{path}: cannot read vehicle profile ({exc.strerror})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise FlighttestError(f"{path}: malformed TOML ({exc})") from None
+    data = read_toml(path, "vehicle profile")
     return profile_from_dict(data, path)
 
 

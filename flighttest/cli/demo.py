@@ -20,7 +20,6 @@ import contextlib
 import datetime as dt
 import os
 import sys
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +29,7 @@ from rich.table import Table
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
 from flighttest.profiles import load_profile, write_w_allow
+from flighttest.tomlfile import read_toml
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,9 +57,9 @@ def _mission_config(mission: str, out_dir: Path, stale_periods: float | None) ->
     vertical vs 2.5 s helix); ``--stale-periods`` relaxes the stale-telemetry guard on a busy machine."""
     from flighttest.cli.fly import MISSIONS, MISSIONS_DIR
 
-    cfg = tomllib.loads((MISSIONS_DIR / f"{MISSIONS[mission]}.toml").read_text())
+    cfg = read_toml(MISSIONS_DIR / f"{MISSIONS[mission]}.toml", "mission config")
     if mission == "vertical":
-        helix = tomllib.loads((MISSIONS_DIR / "helix_descent.toml").read_text())
+        helix = read_toml(MISSIONS_DIR / "helix_descent.toml", "mission config")
         cfg["flight"]["start_height_m"] = helix["flight"]["start_height_m"]
         cfg["plan"]["descent_m"] = helix["plan"]["descent_m"]
     if stale_periods is not None:
