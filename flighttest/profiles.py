@@ -289,14 +289,15 @@ def profile_to_dict(profile: VehicleProfile) -> dict[str, Any]:
     return d
 
 
-def write_w_allow(profile: VehicleProfile, w_allow_mps: float, source: str) -> Path:
-    """Store a measured ``w_allow`` (with its provenance) in the user's copy of the profile."""
+def write_w_allow(profile: VehicleProfile, w_allow_mps: float, source: str, target: Path | None = None) -> Path:
+    """Store a measured ``w_allow`` (with its provenance) in the user's copy of the profile, or in ``target``."""
     if not (math.isfinite(w_allow_mps) and w_allow_mps > 0):
         raise FlighttestError(f"refusing to store w_allow={w_allow_mps!r}: must be a positive number")
     updated = replace(profile, vrs=replace(profile.vrs, w_allow_mps=float(w_allow_mps), source=source))
-    src = Path(profile.path)
-    target_dir = user_dirs()[0]
-    target = src if src.parent.resolve() in {d.resolve() for d in user_dirs()} else target_dir / src.name
+    if target is None:
+        src = Path(profile.path)
+        in_user_dir = src.parent.resolve() in {d.resolve() for d in user_dirs()}
+        target = src if in_user_dir else user_dirs()[0] / src.name
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_suffix(".toml.tmp")
     tmp.write_text(tomli_w.dumps(profile_to_dict(updated)), encoding="utf-8")

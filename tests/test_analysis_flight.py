@@ -12,10 +12,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from flighttest.analysis.compare import primary_descent
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
 from flighttest.analysis.segment import find_descents
-from flighttest.cli.analysis import primary_descent
 from flighttest.profiles import load_profile
 
 pytestmark = pytest.mark.flight

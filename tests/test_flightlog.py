@@ -126,7 +126,7 @@ def test_a_flight_killed_mid_descent_leaves_a_folder_the_analysis_opens(fake_veh
     import tomli_w
 
     from flighttest.analysis.loaders.folder import load_folder
-    from flighttest.cli.fly import MISSIONS_DIR
+    from flighttest.mission_scripts import MISSIONS_DIR
 
     cfg = tomllib.loads((MISSIONS_DIR / "vertical_descent.toml").read_text())
     cfg["guard"]["stale_periods"] = 15.0  # a busy CI machine; this test is about the log

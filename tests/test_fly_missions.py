@@ -20,8 +20,8 @@ import pandas as pd
 import pytest
 import tomli_w
 
-from flighttest.cli.fly import MISSIONS, MISSIONS_DIR
 from flighttest.frames import GuardRegion
+from flighttest.mission_scripts import MISSIONS, MISSIONS_DIR
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
 from flighttest.profiles import load_profile

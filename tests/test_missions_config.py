@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from flighttest.cli.fly import MISSIONS, MISSIONS_DIR
 from flighttest.errors import FlighttestError
+from flighttest.mission_scripts import MISSIONS, MISSIONS_DIR
 from flighttest.missions_config import load_mission_config, mission_config_from_dict
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
 from flighttest.profiles import load_profile

@@ -36,8 +36,10 @@ An onset is reported only when the fitted fluctuation at the fastest descent flo
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -89,6 +91,15 @@ class Onset:
         d.pop("bins")
         d["signals"] = list(self.signals)
         return d
+
+    def provenance(self, log_path: Path | str, by: str) -> str:
+        """The ``source`` line stored with the identified ``w_allow`` in a profile."""
+        today = dt.date.today().isoformat()
+        return (
+            f"identified {today} by {by} from probe log {Path(log_path).resolve()}: onset "
+            f"{self.w_onset_mps:.3f} ± {self.uncertainty_mps:.3f} m/s ({self.w_onset_n:.4f} v_h), "
+            f"hinge fit of fluctuation power vs descent rate (rise {self.rise_ratio:.1f}× hover)"
+        )
 
 
 def _high_passed(x: np.ndarray) -> np.ndarray:

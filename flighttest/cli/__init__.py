@@ -16,7 +16,10 @@ with a live blade-frame VRS guard, probe the VRS onset with a sine sweep, and an
 
 EPILOG = """\
 start here:
-  flighttest demo                         the whole job end to end against the built-in fake vehicle
+  flighttest campaign --sim --yes -o logs/campaign
+                                          the whole field day end to end against the built-in fake vehicle
+  flighttest campaign --vehicle NAME --connect URL -o DIR
+                                          ... and on the real aircraft (asks before each step)
   flighttest vehicle list                 shipped and user vehicle profiles
   flighttest region chart --vehicle x500 -o chart.png
 every command that reports numbers takes --json; bad input exits with code 2 and one error line.
@@ -24,7 +27,7 @@ every command that reports numbers takes --json; bad input exits with code 2 and
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from flighttest.cli import analysis, demo, fly, plan, region, sim, vehicle
+    from flighttest.cli import analysis, campaign, fly, plan, region, sim, vehicle
 
     parser = argparse.ArgumentParser(
         prog="flighttest",
@@ -34,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"flighttest {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in (demo, vehicle, region, plan, sim, fly, analysis):
+    for module in (campaign, vehicle, region, plan, sim, fly, analysis):
         module.register(sub)
     return parser
 

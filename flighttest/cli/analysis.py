@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import math
 import sys
 from pathlib import Path
@@ -11,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 from rich.table import Table
 
+from flighttest.analysis.compare import add_speedup, compare_row, primary_descent  # noqa: F401 (re-export)
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
 
@@ -102,7 +102,7 @@ def _seg_config(args: argparse.Namespace):
 
 def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
     """(logs, walked folders) from the command line."""
-    from flighttest.analysis.campaign import find_logs
+    from flighttest.analysis.batch import find_logs
     from flighttest.analysis.loaders.folder import is_log_folder
 
     logs: list[Path] = []
@@ -120,7 +120,7 @@ def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
 
 
 def _run(paths: list[Path], vehicle: str | None, seg, jobs: int | None = None):
-    from flighttest.analysis.campaign import analyse_many
+    from flighttest.analysis.batch import analyse_many
 
     if jobs is not None and jobs < 1:
         raise FlighttestError(f"--jobs must be ≥ 1 (got {jobs})")
@@ -177,7 +177,7 @@ def _descent_table(title: str, d: pd.DataFrame) -> Table:
 
 
 def cmd_analyse(args: argparse.Namespace) -> int:
-    from flighttest.analysis.campaign import PARQUET_NAME, write_parquet
+    from flighttest.analysis.batch import PARQUET_NAME, write_parquet
 
     seg = _seg_config(args)
     logs, walked = _expand(args.logs)
@@ -220,49 +220,9 @@ def cmd_analyse(args: argparse.Namespace) -> int:
     return 2 if errors else 0
 
 
-def primary_descent(d: pd.DataFrame) -> pd.Series | None:
-    """The descent a flight was about: the one flown in the 'stream' phase, else the highest."""
-    if not len(d):
-        return None
-    ok = d[~d["glitch"]] if "glitch" in d else d
-    ok = ok if len(ok) else d
-    streamed = ok[ok["phase"].astype(str) == "stream"] if "phase" in ok else ok.iloc[0:0]
-    pick = streamed if len(streamed) else ok
-    return pick.loc[pick["height_m"].idxmax()]
-
-
 def cmd_compare(args: argparse.Namespace) -> int:
     results, errors = _run(args.logs, args.vehicle, _seg_config(args))
-    rows = []
-    for r in results:
-        s, p = r["summary"], primary_descent(r["descents"])
-        row = {"log": s["log"], "mission": None, "descents": len(r["descents"])}
-        if p is not None:
-            row.update(
-                {
-                    k: p[k]
-                    for k in (
-                        "mission",
-                        "trajectory",
-                        "start_s",
-                        "duration_s",
-                        "height_m",
-                        "mean_rate_mps",
-                        "max_rate_mps",
-                        "horizontal_excursion_m",
-                        "time_inside_s",
-                        "time_near_s",
-                        "min_margin_mps",
-                        "time_vrs_s",
-                        "fluct_index_max",
-                    )
-                }
-            )
-        rows.append(row)
-    base = rows[0].get("duration_s") if rows else None
-    for row in rows:
-        dur = row.get("duration_s")
-        row["speedup_vs_first"] = base / dur if base and dur and math.isfinite(base) and dur > 0 else None
+    rows = add_speedup([compare_row(r["summary"]["log"], r["descents"]) for r in results])
     if args.json:
         print_json(rows)
     else:
@@ -350,12 +310,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         "profile_written": None,
     }
     if args.write_profile:
-        today = dt.date.today().isoformat()
-        source = (
-            f"identified {today} by flighttest identify from probe log {Path(args.log).resolve()}: onset "
-            f"{onset.w_onset_mps:.3f} ± {onset.uncertainty_mps:.3f} m/s ({onset.w_onset_n:.4f} v_h), "
-            f"hinge fit of fluctuation power vs descent rate (rise {onset.rise_ratio:.1f}× hover)"
-        )
+        source = onset.provenance(args.log, "flighttest identify")
         out["profile_written"] = str(write_w_allow(profile, onset.w_onset_mps, source))
     if args.json:
         print_json(out)

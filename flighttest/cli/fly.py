@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
-import importlib.util
 import math
 import sys
 from pathlib import Path
@@ -19,9 +18,7 @@ from types import ModuleType
 
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
-
-MISSIONS = {"probe": "vrs_probe", "helix": "helix_descent", "vertical": "vertical_descent"}
-MISSIONS_DIR = Path(__file__).resolve().parents[2] / "missions"
+from flighttest.mission_scripts import MISSIONS, load_mission_module
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,16 +50,6 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
     p.add_argument("--no-land", action="store_true", help="end in Hold at the end point instead of landing")
     p.add_argument("--log-dir", type=Path, metavar="DIR", help="root folder of flight logs (default logs/)")
     p.add_argument("--json", action="store_true", help="print the flight summary as JSON")
-
-
-def load_mission_module(name: str) -> ModuleType:
-    path = MISSIONS_DIR / f"{MISSIONS[name]}.py"
-    if not path.is_file():
-        raise FlighttestError(f"mission script not found: {path}")
-    spec = importlib.util.spec_from_file_location(f"flighttest_mission_{name}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _finite(name: str, v: float | None, positive: bool = True) -> None:

@@ -1,0 +1,178 @@
+"""What each campaign step does, reading the files earlier steps wrote and returning what it wrote.
+
+Steps raise :class:`StepFailed` when the vehicle did not do what the step needs (an aborted
+flight, no onset in the probe's data); the campaign stops there and the step runs again on resume.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from flighttest.campaign.state import CampaignState
+from flighttest.errors import FlighttestError
+from flighttest.flightlog import write_json_atomic
+from flighttest.mission_scripts import MISSIONS, load_mission_module, mission_config_path
+from flighttest.missions_config import MissionConfig, load_mission_config
+from flighttest.profiles import VehicleProfile, load_profile, write_w_allow
+from flighttest.trajectory import Trajectory
+
+FLIGHT_OK = {"probe": ("probe_stopped", "completed"), "vertical": ("completed",), "helix": ("completed",)}
+
+
+class StepFailed(FlighttestError):
+    """The step ran but did not reach its goal (exit code 1: not bad input, a result)."""
+
+    exit_code = 1
+
+    def __init__(self, message: str, outputs: dict[str, Any] | None = None) -> None:
+        super().__init__(message)
+        self.outputs = outputs or {}
+
+
+@dataclass
+class StepContext:
+    state: CampaignState
+    vehicle: str  # the user's profile: name or .toml path
+    connect: Callable[[], str]  # the link URL; with --sim the fake starts on the first call
+    yes: bool = False  # skip each flight's go/no-go prompt
+    stale_periods: float | None = None
+    show_panel: bool = False
+    confirm: Callable[[Any], bool] | None = None  # the flight's go/no-go after preflight
+    print_fn: Callable[[Any], None] = print
+
+    @property
+    def dir(self):
+        return self.state.dir
+
+    def config(self, mission: str) -> MissionConfig:
+        cfg = load_mission_config(self.dir.config / mission_config_path(mission).name)
+        if self.stale_periods is not None:
+            cfg = dataclasses.replace(cfg, guard=dataclasses.replace(cfg.guard, stale_periods=self.stale_periods))
+        return cfg
+
+    def identified_profile(self) -> VehicleProfile:
+        return load_profile(self.state.output("identify", "profile"))
+
+
+def write_configs(d, overwrite: bool = False) -> list[Path]:
+    """The missions' own TOML files, copied into the campaign (comments and all) unless already there,
+    so edits made for this campaign survive a resume. The vertical baseline starts at the helix's
+    height and descends as far, so the two descent times compare like for like (the paper: 5 m)."""
+    d.config.mkdir(parents=True, exist_ok=True)
+    helix = load_mission_config(mission_config_path("helix"))
+    written = []
+    for mission in MISSIONS:
+        src = mission_config_path(mission)
+        dst = d.config / src.name
+        if dst.exists() and not overwrite:
+            continue
+        text = src.read_text(encoding="utf-8")
+        if mission == "vertical":
+            same = "  # = the helix's, like for like"
+            h0, dh = helix.flight.start_height_m, float(helix.plan["descent_m"])
+            text = re.sub(r"(?m)^start_height_m\s*=.*$", f"start_height_m = {h0!r}{same}", text)
+            text = re.sub(r"(?m)^descent_m\s*=.*$", f"descent_m = {dh!r}{same}", text)
+        dst.write_text(text, encoding="utf-8")
+        written.append(dst)
+    for mission in MISSIONS:  # validate now, before anything flies
+        load_mission_config(d.config / mission_config_path(mission).name)
+    return written
+
+
+def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfig, traj: Trajectory,
+         traj_path: str = "") -> dict[str, Any]:  # fmt: skip
+    from flighttest.mission import FlyRequest, fly
+
+    req = FlyRequest(
+        connect=ctx.connect(), profile=profile, config=cfg, trajectory=traj, mission_name=step,
+        trajectory_path=traj_path, yes=ctx.yes, log_root=ctx.dir.flights, show_panel=ctx.show_panel,
+        confirm=ctx.confirm, print_fn=ctx.print_fn,
+    )  # fmt: skip
+    out = asyncio.run(fly(req))
+    rec = {"log_dir": out.log_dir, "outcome": out.outcome, "abort_reason": out.abort_reason,
+           "descent_time_s": out.descent_time_s, "guard_aborts": guard_aborts(Path(out.log_dir))}  # fmt: skip
+    if out.outcome not in FLIGHT_OK[step]:
+        why = out.abort_reason or "no reason given"
+        raise StepFailed(f"{step} flight {out.outcome}: {why} (log {out.log_dir})", rec)
+    return rec
+
+
+def guard_aborts(log_dir: Path) -> int:
+    """How many times the guard ordered an abort in a flight (``guard.csv`` action ``abort``)."""
+    path = log_dir / "guard.csv"
+    if not path.is_file():
+        return 0
+    actions = pd.read_csv(path, usecols=["action"], dtype=str)["action"]
+    return int((actions == "abort").sum())
+
+
+def run_probe(ctx: StepContext) -> dict[str, Any]:
+    profile = load_profile(ctx.vehicle)
+    cfg = ctx.config("probe")
+    traj = load_mission_module("probe").plan(profile, cfg)
+    return _fly(ctx, "probe", profile, cfg, traj)
+
+
+def run_identify(ctx: StepContext) -> dict[str, Any]:
+    from flighttest.analysis.identify import identify_onset
+    from flighttest.analysis.loaders import load_log
+
+    profile = load_profile(ctx.vehicle)
+    log_dir = ctx.state.output("probe", "log_dir")
+    try:
+        onset = identify_onset(load_log(log_dir), profile)
+    except FlighttestError as exc:
+        raise StepFailed(f"no VRS onset in the probe's log {log_dir}: {exc}") from None
+    target = ctx.dir.vehicles / f"{profile.name}.toml"
+    write_w_allow(profile, onset.w_onset_mps, onset.provenance(log_dir, "flighttest campaign"), target=target)
+    summary = {"probe_log": log_dir, "vehicle": profile.name, "prior_w_allow_mps": profile.w_allow_mps,
+               **onset.summary(), "profile": str(target)}  # fmt: skip
+    write_json_atomic(ctx.dir.identify_file, summary)
+    return {"w_onset_mps": onset.w_onset_mps, "uncertainty_mps": onset.uncertainty_mps,
+            "prior_w_allow_mps": profile.w_allow_mps, "profile": str(target),
+            "identify_json": str(ctx.dir.identify_file)}  # fmt: skip
+
+
+def run_plan(ctx: StepContext) -> dict[str, Any]:
+    profile = ctx.identified_profile()
+    ctx.dir.plans.mkdir(parents=True, exist_ok=True)
+    out: dict[str, Any] = {"w_allow_mps": profile.w_allow_mps}
+    for mission in ("vertical", "helix"):
+        traj = load_mission_module(mission).plan(profile, ctx.config(mission))
+        path = ctx.dir.plans / f"{mission}.csv"
+        traj.save(path)
+        out[mission] = str(path)
+        out[f"{mission}_t_f_s"] = traj.duration_s
+    return out
+
+
+def run_descent(ctx: StepContext, mission: str) -> dict[str, Any]:
+    profile = ctx.identified_profile()
+    path = ctx.state.output("plan", mission)
+    traj = Trajectory.load(path, profile)
+    return _fly(ctx, mission, profile, ctx.config(mission), traj, path)
+
+
+def run_report(ctx: StepContext) -> dict[str, Any]:
+    from flighttest.campaign.summary import write_campaign_report
+
+    return write_campaign_report(ctx.state, ctx.identified_profile())
+
+
+RUNNERS: dict[str, Callable[[StepContext], dict[str, Any]]] = {
+    "probe": run_probe,
+    "identify": run_identify,
+    "plan": run_plan,
+    "vertical": lambda ctx: run_descent(ctx, "vertical"),
+    "helix": lambda ctx: run_descent(ctx, "helix"),
+    "report": run_report,
+}
+

@@ -1,0 +1,166 @@
+"""The campaign's report: the descents side by side, the identified onset, the figures, one summary.
+
+``report/summary.md`` is the table a person pastes into a flight-test report; ``summary.json`` holds the
+same figures for scripts; ``compare.csv`` is ``flighttest compare`` of the two descents; ``report.md``
+(with its PNGs) details every flight; ``velocity_space.png`` and ``descent_times.png`` compare them.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+from flighttest import __version__
+from flighttest.analysis.compare import add_speedup, compare_row
+from flighttest.campaign.state import STEPS, CampaignState
+from flighttest.errors import FlighttestError
+from flighttest.flightlog import write_json_atomic
+from flighttest.profiles import VehicleProfile
+
+REPORT_FILES = ("summary.md", "summary.json", "compare.csv", "report.md", "velocity_space.png", "descent_times.png")
+FLIGHTS = ("probe", "vertical", "helix")
+DESCENTS = ("vertical", "helix")
+ROWS = (  # the summary table, one column per descent: label, key, format
+    ("outcome", "outcome", "{}"),
+    ("descent time s (rest to rest)", "descent_time_s", "{:.2f}"),
+    ("speed-up × (vertical / this)", "speedup_vs_vertical", "{:.2f}"),
+    ("height m", "height_m", "{:.2f}"),
+    ("descending s (log segment)", "duration_s", "{:.2f}"),
+    ("mean descent rate m/s", "mean_rate_mps", "{:.2f}"),
+    ("max descent rate m/s", "max_rate_mps", "{:.2f}"),
+    ("horizontal excursion m", "horizontal_excursion_m", "{:.2f}"),
+    ("inside the guard region s", "time_inside_s", "{:.2f}"),
+    ("near its boundary s", "time_near_s", "{:.2f}"),
+    ("min margin to it m/s", "min_margin_mps", "{:.3f}"),
+    ("guard aborts", "guard_aborts", "{}"),
+)
+
+
+def cell(row: dict[str, Any], key: str, fmt: str) -> str:
+    v = row.get(key)
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return fmt.format(v)
+
+
+def campaign_summary(state: CampaignState, profile: VehicleProfile, rows: dict[str, dict[str, Any]]) -> dict:
+    """Everything the summary says, as JSON-able data (also what ``flighttest campaign --json`` prints)."""
+    ident = state.steps["identify"].outputs
+    vert, helix = rows.get("vertical", {}), rows.get("helix", {})
+    return {
+        "vehicle": profile.name,
+        "v_h_mps": profile.v_h_mps,
+        "out_dir": str(state.dir.root),
+        "identified_w_allow_mps": ident.get("w_onset_mps"),
+        "identified_uncertainty_mps": ident.get("uncertainty_mps"),
+        "prior_w_allow_mps": ident.get("prior_w_allow_mps"),
+        "identified_profile": ident.get("profile"),
+        "vertical_descent_s": vert.get("descent_time_s"),
+        "helix_descent_s": helix.get("descent_time_s"),
+        "speedup_helix_vs_vertical": helix.get("speedup_vs_vertical"),
+        "flights": [rows[s] for s in DESCENTS if s in rows],
+        "probe_log": state.steps["probe"].outputs.get("log_dir"),
+        "steps_elapsed_s": {s: state.steps[s].elapsed_s for s in STEPS},
+        "report": str(state.dir.report),
+        "flighttest_version": __version__,
+    }
+
+
+def headlines(s: dict) -> list[str]:
+    """The two sentences a flight-test report opens with: the onset found, and the time saved."""
+    onset_n = s["identified_w_allow_mps"] / s["v_h_mps"] if s["identified_w_allow_mps"] else None
+    return [
+        f"VRS onset from the probe: {cell(s, 'identified_w_allow_mps', '{:.3f}')} ± "
+        f"{cell(s, 'identified_uncertainty_mps', '{:.3f}')} m/s ({cell({'n': onset_n}, 'n', '{:.3f}')} v_h; "
+        f"v_h {s['v_h_mps']:.2f} m/s; the profile said {cell(s, 'prior_w_allow_mps', '{:.3f}')} m/s)",
+        f"over the same height the helix took {cell(s, 'helix_descent_s', '{:.2f}')} s against the vertical "
+        f"baseline's {cell(s, 'vertical_descent_s', '{:.2f}')} s: "
+        f"{cell(s, 'speedup_helix_vs_vertical', '{:.2f}')}× as fast",
+    ]
+
+
+def table_rows(s: dict) -> list[tuple[str, str, str]]:
+    """(quantity, vertical, helix) rows of the summary table."""
+    flights = {f["step"]: f for f in s["flights"]}
+    return [(label, *(cell(flights.get(d, {}), key, fmt) for d in DESCENTS)) for label, key, fmt in ROWS]
+
+
+def summary_markdown(summary: dict) -> str:
+    lines = [
+        f"# Fast-descent campaign: {summary['vehicle']}",
+        "",
+        *(f"- {h}" for h in headlines(summary)),
+        "",
+        "| | vertical baseline | helix |",
+        "|---|---:|---:|",
+    ]
+    lines += [f"| {q} | {v} | {h} |" for q, v, h in table_rows(summary)]
+    lines += [
+        "",
+        "Descent time: from the first setpoint of the planned descent until the vehicle is at rest within",
+        "0.2 m of its end point (the paper's t_f); the figures show that span. Log segment: the main descent",
+        "found in each flight's log (`flighttest compare`). Inside/near: time with the blade-frame velocity inside /",
+        "within the margin of the guard region; guard aborts: the live guard's abort orders (`guard.csv`).",
+        "Every flight in detail, the probe's fluctuation plot with the onset: [report.md](report.md).",
+        "",
+        "![velocity space](velocity_space.png)",
+        "",
+        "![descent times](descent_times.png)",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict[str, Any]:
+    """Analyse the campaign's flights and write every file of ``REPORT_FILES`` into ``DIR/report``."""
+    from flighttest.analysis.identify import identify_onset
+    from flighttest.analysis.loaders import load_log
+    from flighttest.analysis.pipeline import analyse
+    from flighttest.analysis.report import write_report
+    from flighttest.campaign.figures import plot_descent_comparison, plot_tracks_velocity_space
+
+    out_dir = state.dir.report
+    out_dir.mkdir(parents=True, exist_ok=True)
+    analyses, rows = {}, {}
+    for step in FLIGHTS:
+        rec = state.steps[step]
+        if not rec.outputs.get("log_dir"):
+            continue
+        analyses[step] = analyse(load_log(rec.outputs["log_dir"]), profile.path)
+        a, o = analyses[step], rec.outputs
+        rows[step] = {"step": step, "outcome": o.get("outcome"), "guard_aborts": o.get("guard_aborts"),
+                      **compare_row(o["log_dir"], a.descents, a.log.events)}  # fmt: skip
+    if "vertical" not in analyses or "helix" not in analyses:
+        raise FlighttestError("the report needs both the vertical and the helix flight")
+    for row in add_speedup([rows["vertical"], rows["helix"]], key="descent_time_s"):
+        row["speedup_vs_vertical"] = row.pop("speedup_vs_first")
+    with (out_dir / "compare.csv").open("w", newline="", encoding="utf-8") as f:
+        keys = list(dict.fromkeys(k for s in ("vertical", "helix") for k in rows[s]))
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows[s] for s in ("vertical", "helix"))
+    onsets = {}
+    if "probe" in analyses:
+        onsets[str(analyses["probe"].log.path)] = identify_onset(analyses["probe"].log, profile)
+    write_report(list(analyses.values()), out_dir, onsets)
+    plot_tracks_velocity_space(analyses["vertical"], analyses["helix"], out_dir / "velocity_space.png",
+                               probe=analyses.get("probe"))  # fmt: skip
+    plot_descent_comparison(analyses["vertical"], analyses["helix"], out_dir / "descent_times.png")
+    summary = campaign_summary(state, profile, rows)
+    summary["steps_elapsed_s"]["report"] = None  # this step is still running; campaign.json has its time
+    write_json_atomic(out_dir / "summary.json", summary)
+    (out_dir / "summary.md").write_text(summary_markdown(summary), encoding="utf-8")
+    return {"report_dir": str(out_dir), "files": [str(out_dir / f) for f in REPORT_FILES],
+            "speedup_helix_vs_vertical": summary["speedup_helix_vs_vertical"]}  # fmt: skip
+
+
+def read_summary(report_dir: Path) -> dict[str, Any]:
+    import json
+
+    path = report_dir / "summary.json"
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise FlighttestError(f"{path}: cannot read the campaign summary ({exc})") from None

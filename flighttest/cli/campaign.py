@@ -1,0 +1,276 @@
+"""flighttest campaign: the field day, end to end, in one folder.
+
+  probe     fly the sine-sweep VRS probe (stopped by the fluctuation detector)
+  identify  find the VRS onset in its log; store it as w_allow in DIR/vehicles/NAME.toml
+  plan      plan the vertical baseline and the helix with that boundary (DIR/plans/)
+  vertical  fly the vertical baseline with the live guard
+  helix     fly the helix with the live guard
+  report    descent times side by side, exposure, figures: DIR/report/summary.md
+
+Before each step it says what comes next and asks to go on (--yes: it does not ask; each flight also
+asks its own GO after the preflight checks). Run the same command again to resume after a stop, an
+abort or Ctrl-C: steps already done are not flown again. --only STEP runs one step again from the
+files of the earlier ones (e.g. --only plan after editing DIR/config/helix_descent.toml, then
+--only helix); --from STEP runs it and everything after.
+
+  flighttest campaign --sim --yes -o logs/campaign                 # ground rehearsal on the fake
+  flighttest campaign --vehicle x500 --connect udpin://0.0.0.0:14540 -o logs/2026-12-01-field
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime as dt
+import math
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from flighttest.campaign.state import FLIGHT_STEPS, STEPS, TITLES, CampaignState
+from flighttest.console import console, err_console, print_json
+from flighttest.errors import FlighttestError
+
+SIM_DEFAULT_PARAMS = {"MPC_Z_VEL_MAX_DN": 3.0}  # rehearsal: let offboard descents through unclipped
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("campaign", help="the whole field day: probe, identify, plan, fly vertical and helix, report",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    link = p.add_mutually_exclusive_group(required=True)
+    link.add_argument("--connect", metavar="URL",
+                      help="the vehicle: udpin://0.0.0.0:14540, serial:///dev/ttyUSB0:57600, …")
+    link.add_argument("--sim", action="store_true", help="fly the built-in fake vehicle (started and stopped here)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="the campaign's folder")
+    p.add_argument("--vehicle", metavar="NAME", help="vehicle profile name or .toml path (with --sim default x500)")
+    _add_common(p)
+    steps = p.add_mutually_exclusive_group()
+    steps.add_argument("--only", choices=STEPS, metavar="STEP", help=f"run just this step ({', '.join(STEPS)})")
+    steps.add_argument("--from", dest="start", choices=STEPS, metavar="STEP", help="run this step and all after it")
+    p.set_defaults(func=cmd_campaign)
+
+    d = sub.add_parser("demo", help="= campaign --sim --yes -o logs/demo-<time>: the whole job on the fake",
+                       description="The whole campaign against the built-in fake vehicle, without prompts "
+                       "(flighttest campaign --sim --yes).")  # fmt: skip
+    d.add_argument("-o", "--output", type=Path, metavar="DIR", help="the campaign's folder (default logs/demo-<time>)")
+    d.add_argument("--vehicle", metavar="NAME", default="x500", help="vehicle profile (default x500)")
+    _add_common(d)
+    d.set_defaults(func=cmd_demo)
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--yes", action="store_true", help="do not ask before each step and each flight")
+    p.add_argument("--stale-periods", type=float, metavar="N",
+                   help="stale-telemetry allowance in telemetry periods (default: the mission configs', 3); "
+                   "raise it only when rehearsing on a heavily loaded machine")  # fmt: skip
+    p.add_argument("--json", action="store_true", help="print the campaign summary as JSON (progress on stderr)")
+    g = p.add_argument_group("the fake vehicle (--sim)")
+    g.add_argument("--truth-onset", type=float, metavar="MPS",
+                   help="the fake's true VRS onset descent rate (default: Onera's for its profile)")  # fmt: skip
+    g.add_argument("--sim-wind", type=float, nargs=3, metavar=("N", "E", "D"), help="the fake's wind, m/s NED")
+    g.add_argument("--sim-seed", type=int, metavar="N", help="seed of the fake's fluctuations and gusts")
+    g.add_argument("--sim-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a PX4 parameter of the fake (default MPC_Z_VEL_MAX_DN=3)")  # fmt: skip
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from flighttest.flightlog import default_log_root
+
+    args.sim, args.connect, args.only, args.start, args.yes = True, None, None, None, True
+    args.output = args.output or default_log_root() / f"demo-{dt.datetime.now():%Y%m%d-%H%M%S}"
+    return cmd_campaign(args)
+
+
+def _validate(args: argparse.Namespace) -> dict[str, Any]:
+    """Every input checked before the fake starts or anything connects; returns the fake's options."""
+    from flighttest.link import check_url
+
+    if args.connect:
+        check_url(args.connect)
+        if not args.vehicle:
+            raise FlighttestError("--vehicle is required with --connect (the profile of the aircraft you fly)")
+        if args.truth_onset is not None or args.sim_wind or args.sim_seed is not None or args.sim_param:
+            raise FlighttestError("--truth-onset, --sim-wind, --sim-seed and --sim-param need --sim")
+    if args.stale_periods is not None and not (math.isfinite(args.stale_periods) and args.stale_periods >= 1):
+        raise FlighttestError(f"--stale-periods must be a number ≥ 1 (got {args.stale_periods})")
+    if args.truth_onset is not None and not (math.isfinite(args.truth_onset) and args.truth_onset > 0):
+        raise FlighttestError(f"--truth-onset must be a positive number (got {args.truth_onset})")
+    if args.sim_wind and not all(math.isfinite(w) for w in args.sim_wind):
+        raise FlighttestError("--sim-wind must be three finite numbers")
+    params: dict[str, float] = dict(SIM_DEFAULT_PARAMS)
+    for item in args.sim_param:
+        name, sep, value = item.partition("=")
+        try:
+            params[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise FlighttestError(f"--sim-param must be NAME=NUMBER (got {item!r})")
+    opts: dict[str, Any] = {"param": params}
+    if args.truth_onset is not None:
+        opts["truth_onset"] = args.truth_onset
+    if args.sim_wind:
+        opts["wind_ned"] = tuple(args.sim_wind)
+    if args.sim_seed is not None:
+        opts["seed"] = args.sim_seed
+    return opts
+
+
+def _clock(seconds: float) -> str:
+    m, s = divmod(round(seconds), 60)
+    return f"{m:d}:{s:02d}"
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    from flighttest.campaign.steps import RUNNERS, StepContext, StepFailed, write_configs
+    from flighttest.cli.fly import _confirm
+    from flighttest.profiles import load_profile
+
+    sim_opts = _validate(args)
+    vehicle = args.vehicle or "x500"
+    profile = load_profile(vehicle)
+    state = CampaignState.open(args.output, profile.name)
+    steps = state.to_run(args.only, args.start)
+    state.check_needs(steps)
+    write_configs(state.dir)
+    out = err_console if args.json else console
+    if steps and not args.yes and not sys.stdin.isatty():
+        raise FlighttestError("no terminal to confirm each step: pass --yes to run the campaign unattended")
+    state.save()
+
+    with contextlib.ExitStack() as stack:
+        link: dict[str, str] = {}
+
+        def connect() -> str:
+            if "url" not in link:
+                if args.sim:
+                    link["url"] = _start_fake(stack, state, profile.name, sim_opts, out)
+                else:
+                    link["url"] = args.connect
+            return link["url"]
+
+        ctx = StepContext(state=state, vehicle=vehicle, connect=connect, yes=args.yes,
+                          stale_periods=args.stale_periods, show_panel=out.is_terminal and not args.json,
+                          confirm=_confirm, print_fn=out.print)  # fmt: skip
+        t0 = time.monotonic()
+        stop: list[str] = []  # a Ctrl-C during a ground step: finish it, then stop
+        out.rule(f"[bold]flighttest campaign — {profile.name} — {state.dir.root}")
+        if not steps:
+            out.print("every step is done (use --only STEP or --from STEP to run one again)")
+        for k, step in enumerate(steps):
+            nxt = steps[k + 1] if k + 1 < len(steps) else "the summary"
+            out.rule(f"[bold]step {STEPS.index(step) + 1}/{len(STEPS)}: {step}[/] — {TITLES[step]}", align="left")
+            out.print(f"[dim]campaign time {_clock(time.monotonic() - t0)}; after this: {nxt}[/]")
+            if not args.yes and not _ask(step):
+                out.print(f"stopped before '{step}'. Run the same command again to go on from here.")
+                return 1
+            if not args.only:
+                state.invalidate(steps[k + 1:])
+            state.begin(step)
+            try:
+                if step in FLIGHT_STEPS:  # the flight handles Ctrl-C itself: its abort ladder
+                    outputs = RUNNERS[step](ctx)
+                else:
+                    with _stop_after_step(stop, out), out.status(f"{step}: {TITLES[step]} …"):
+                        outputs = RUNNERS[step](ctx)
+            except KeyboardInterrupt:
+                state.finish(step, "interrupted", error="interrupted by the operator")
+                out.print(f"[yellow]interrupted during '{step}'[/]; run the same command again to resume from it")
+                raise
+            except StepFailed as exc:
+                state.finish(step, "failed", outputs=exc.outputs, error=str(exc))
+                out.print(f"[red]{step} failed[/]: {exc}")
+                out.print("fix the cause, then run the same command again to resume from this step")
+                raise
+            except BaseException as exc:
+                state.finish(step, "failed", error=str(exc) or type(exc).__name__)
+                raise
+            state.finish(step, "done", outputs)
+            out.print(f"[green]✓ {step}[/] in {_clock(state.steps[step].elapsed_s or 0)}  {_brief(step, outputs)}")
+            if stop and k + 1 < len(steps):
+                out.print(f"[yellow]stopped after '{step}' (Ctrl-C)[/]; run the same command again to go on")
+                raise KeyboardInterrupt
+    return _final(state, profile, args.json, out)
+
+
+@contextlib.contextmanager
+def _stop_after_step(stop: list[str], out: Console):
+    """Ctrl-C during a ground step asks to stop after it (IPOPT, inside the planner, would swallow the
+    interrupt and go on anyway); a second Ctrl-C stops at once."""
+
+    def on_sigint(signum, frame) -> None:
+        if stop:
+            raise KeyboardInterrupt
+        stop.append("sigint")
+        out.print("[yellow]Ctrl-C: stopping after this step (Ctrl-C again: at once)[/]")
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _start_fake(stack: contextlib.ExitStack, state: CampaignState, vehicle: str, opts: dict, out: Console) -> str:
+    from sitl_fakes.launcher import FakeVehicle
+
+    state.dir.sim.mkdir(parents=True, exist_ok=True)
+    truth = state.dir.sim / f"truth-{dt.datetime.now():%Y%m%d-%H%M%S}.csv"
+    fake = stack.enter_context(FakeVehicle(vehicle=vehicle, truth_log=truth, **opts))
+    out.print(f"fake vehicle: {fake.url} (ground truth: {truth})")
+    return fake.url
+
+
+def _ask(step: str) -> bool:
+    from rich.prompt import Confirm
+
+    return Confirm.ask(f"[bold]go on with '{step}'?[/]", default=step not in FLIGHT_STEPS)
+
+
+def _brief(step: str, o: dict[str, Any]) -> str:
+    if step in FLIGHT_STEPS:
+        d = o.get("descent_time_s")
+        return f"{o['outcome']}" + (f", descent {d:.2f} s" if d else "") + f"; log {o['log_dir']}"
+    if step == "identify":
+        return f"VRS onset {o['w_onset_mps']:.3f} ± {o['uncertainty_mps']:.3f} m/s → {o['profile']}"
+    if step == "plan":
+        return f"vertical {o['vertical_t_f_s']:.2f} s, helix {o['helix_t_f_s']:.2f} s planned"
+    if step == "report":
+        return f"{o['report_dir']}"
+    return ""
+
+
+def _final(state: CampaignState, profile, as_json: bool, out: Console) -> int:
+    from flighttest.campaign.summary import headlines, read_summary, table_rows
+
+    if not state.done("report"):
+        status = {s: state.steps[s].status for s in STEPS}
+        if as_json:
+            print_json({"out_dir": str(state.dir.root), "steps": status})
+        else:
+            out.print("steps: " + ", ".join(f"{s} {v}" for s, v in status.items()))
+            out.print("no report yet: run the campaign again (without --only) to finish")
+        return 0
+    summary = read_summary(state.dir.report)
+    summary["steps_elapsed_s"] = {s: state.steps[s].elapsed_s for s in STEPS}
+    if as_json:
+        print_json(summary)
+        return 0
+    t = Table(title=f"campaign summary — {summary['vehicle']} — paste into the test report", title_justify="left")
+    t.add_column("")
+    t.add_column("vertical baseline", justify="right")
+    t.add_column("helix", justify="right")
+    for row in table_rows(summary):
+        t.add_row(*row)
+    out.print(t)
+    for line in headlines(summary):
+        out.print(line)
+    took = ", ".join(f"{s} {_clock(v)}" for s, v in summary["steps_elapsed_s"].items() if v is not None)
+    out.print(f"[dim]step times: {took}[/]")
+    out.print(f"report: [bold]{state.dir.report / 'summary.md'}[/]")
+    return 0
