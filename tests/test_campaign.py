@@ -1,0 +1,172 @@
+"""``flighttest campaign``: the README's main job, against the fake, interrupted and resumed.
+
+The fake's true VRS onset (0.95 m/s) is set apart from the x500 profile's Onera value (0.85 m/s), so
+an identified onset near the truth is measured, not copied from the profile.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from flighttest.campaign.state import STEPS, CampaignState
+from flighttest.campaign.summary import REPORT_FILES
+from flighttest.errors import FlighttestError
+
+TRUTH_ONSET_MPS = 0.95
+
+
+def _campaign(out: Path, *extra: str) -> list[str]:
+    # the busy CI machine runs other flights in parallel: relax the stale-telemetry allowance only
+    return [sys.executable, "-m", "flighttest", "campaign", "--sim", "--yes", "-o", str(out), "--json",
+            "--truth-onset", str(TRUTH_ONSET_MPS), "--stale-periods", "15", *extra]  # fmt: skip
+
+
+def _steps(out: Path) -> dict:
+    return json.loads((out / "campaign.json").read_text())["steps"]
+
+
+@pytest.mark.flight
+@pytest.mark.timeout(900)
+def test_campaign_interrupted_resumes_and_finishes(tmp_path):
+    out = tmp_path / "campaign"
+    env = {**os.environ, "FLIGHTTEST_VEHICLES": str(tmp_path / "my_vehicles")}
+    # first run: Ctrl-C while it plans; the planner finishes its step and the campaign stops there
+    proc = subprocess.Popen(_campaign(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    deadline = time.monotonic() + 400
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (out / "campaign.json").is_file() and _steps(out)["plan"]["status"] == "running":
+            proc.send_signal(signal.SIGINT)
+            break
+        time.sleep(0.05)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    first = _steps(out)
+    assert [first[s]["status"] for s in STEPS] == ["done", "done", "done", "pending", "pending", "pending"]
+    assert not list((out / "flights").glob("*-vertical"))  # it stopped before flying again
+    probe_log = first["probe"]["outputs"]["log_dir"]
+    plan_mtime = (out / "plans" / "helix.csv").stat().st_mtime
+
+    # second run, the same command: resumes at the vertical baseline from the files already written
+    done = subprocess.run(_campaign(out), capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    s = json.loads(done.stdout)
+    steps = _steps(out)
+    assert all(steps[x]["status"] == "done" for x in STEPS)
+    assert [p.name for p in (out / "flights").iterdir() if p.name.endswith("-probe")] == [Path(probe_log).name]
+    assert steps["probe"]["outputs"]["log_dir"] == probe_log
+    assert (out / "plans" / "helix.csv").stat().st_mtime == plan_mtime  # not planned again
+
+    # the identified onset is the fake's truth, stored in the campaign's profile copy, never the user's
+    assert s["identified_w_allow_mps"] == pytest.approx(TRUTH_ONSET_MPS, abs=0.05)
+    assert Path(s["identified_profile"]) == out / "vehicles" / "x500.toml"
+    assert CampaignState.open(out, "x500").steps["plan"].outputs["w_allow_mps"] == s["identified_w_allow_mps"]
+    assert not (tmp_path / "my_vehicles").exists()
+    # both descents flown to the end with the guard silent, the helix clearly faster over the same height
+    flights = {f["step"]: f for f in s["flights"]}
+    for name in ("vertical", "helix"):
+        assert flights[name]["outcome"] == "completed"
+        assert flights[name]["guard_aborts"] == 0
+        guard = pd.read_csv(Path(steps[name]["outputs"]["log_dir"]) / "guard.csv")
+        assert len(guard) > 100 and not (guard["action"] == "abort").any()
+    assert flights["helix"]["height_m"] == pytest.approx(flights["vertical"]["height_m"], abs=0.3)
+    assert s["speedup_helix_vs_vertical"] == pytest.approx(s["vertical_descent_s"] / s["helix_descent_s"])
+    assert s["speedup_helix_vs_vertical"] > 1.2
+    # every file of the report, non-empty; the summary table names both descents
+    for name in REPORT_FILES:
+        assert (out / "report" / name).stat().st_size > 0, name
+    assert (out / "report" / "velocity_space.png").stat().st_size > 20_000
+    md = (out / "report" / "summary.md").read_text()
+    assert "| | vertical baseline | helix |" in md and f"{s['speedup_helix_vs_vertical']:.2f}×" in md
+    compare = pd.read_csv(out / "report" / "compare.csv")
+    assert list(compare["step"]) == ["vertical", "helix"]
+    # the fake never crashed
+    for truth in (out / "sim").glob("truth-*.csv"):
+        log = pd.read_csv(truth, low_memory=False)
+        assert not (log["kind"] == "crash").any()
+
+    # a finished campaign run again does nothing but print its summary (here through the demo alias)
+    again = subprocess.run([sys.executable, "-m", "flighttest", "demo", "-o", str(out), "--json"],
+                           capture_output=True, text=True, timeout=60, env=env)  # fmt: skip
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert json.loads(again.stdout)["helix_descent_s"] == s["helix_descent_s"]
+    assert len(list((out / "sim").glob("truth-*.csv"))) == 2  # no fake started this time
+    # one step alone, from the files of the earlier ones: the report is written again
+    summary_md = out / "report" / "summary.md"
+    summary_md.unlink()
+    only = subprocess.run(_campaign(out, "--only", "report"), capture_output=True, text=True, timeout=120, env=env)
+    assert only.returncode == 0, only.stderr[-2000:]
+    assert summary_md.stat().st_size > 0
+
+
+def _run(*argv: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "flighttest", *argv], capture_output=True, text=True, timeout=60,
+                          cwd=cwd, stdin=subprocess.DEVNULL)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--connect", "bogus://x", "--vehicle", "x500"], "URL"),
+        (["--connect", "udpin://0.0.0.0:14540"], "--vehicle is required"),
+        (["--connect", "udpin://0.0.0.0:14540", "--vehicle", "x500", "--truth-onset", "1"], "need --sim"),
+        (["--sim", "--vehicle", "no_such_vehicle"], "unknown vehicle"),
+        (["--sim", "--sim-param", "MPC_Z_VEL_MAX_DN"], "NAME=NUMBER"),
+        (["--sim", "--stale-periods", "0"], "--stale-periods"),
+        (["--sim", "--truth-onset", "nan"], "--truth-onset"),
+        (["--sim", "--only", "helix"], "needs the files of step 'plan'"),
+        (["--sim"], "pass --yes"),  # no terminal to confirm each step
+    ],
+)
+def test_bad_input_is_one_line_before_anything_flies(tmp_path, argv, message):
+    out = tmp_path / "c"
+    r = _run("campaign", "-o", str(out), *argv)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and message in r.stderr and "Traceback" not in r.stderr
+    assert not (out / "flights").exists() and not (out / "sim").exists()
+
+
+def test_campaign_needs_a_link_choice(tmp_path):
+    r = _run("campaign", "-o", str(tmp_path / "c"))
+    assert r.returncode == 2 and "--connect" in r.stderr and "--sim" in r.stderr
+
+
+def test_folder_of_another_vehicle_is_refused(tmp_path):
+    state = CampaignState.open(tmp_path, "mambo")
+    state.save()
+    with pytest.raises(FlighttestError, match="campaign of vehicle 'mambo'"):
+        CampaignState.open(tmp_path, "x500")
+    (tmp_path / "campaign.json").write_text("{not json")
+    with pytest.raises(FlighttestError, match="not a campaign record"):
+        CampaignState.open(tmp_path, "mambo")
+
+
+def test_resume_order_and_needs(tmp_path):
+    state = CampaignState.open(tmp_path / "c", "x500")
+    assert state.to_run() == list(STEPS)
+    for s in ("probe", "identify"):
+        state.begin(s)
+        state.finish(s, "done", {"x": 1})
+    assert state.to_run() == ["plan", "vertical", "helix", "report"]
+    assert state.to_run(only="report") == ["report"]
+    assert state.to_run(start="identify") == ["identify", "plan", "vertical", "helix", "report"]
+    state.check_needs(["plan"])  # identify is done
+    with pytest.raises(FlighttestError, match="needs the files of step 'plan'"):
+        state.check_needs(["vertical"])
+    # a step redone makes the later ones pending, and the record survives a reload
+    state.begin("plan")
+    state.finish("plan", "done", {"helix": "h.csv"})
+    state.invalidate(["identify"])
+    reloaded = CampaignState.open(tmp_path / "c", "x500")
+    assert reloaded.steps["plan"].outputs == {"helix": "h.csv"}
+    assert state.steps["identify"].status == "pending"
+    with pytest.raises(FlighttestError, match="step 'identify' has not completed"):
+        state.output("identify", "profile")
