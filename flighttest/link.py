@@ -25,7 +25,7 @@ from typing import Any
 
 from flighttest.errors import FlighttestError
 
-URL_RE = re.compile(r"^(udpin|udpout|tcpin|tcpout|udp|tcp|serial|serialflowcontrol)://.+$")
+URL_RE = re.compile(r"^(udpin|udpout|tcpin|tcpout|udp|tcp|serial|serial_flowcontrol)://.+$")
 URL_HELP = "udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT or serial:///dev/ttyUSB0:57600"
 GCS_SYSID = 245  # QGroundControl uses 255; MAVSDK's ground-station default is 245
 
@@ -35,6 +35,8 @@ def check_url(url: str) -> str:
         raise FlighttestError(f"bad --connect URL {url!r}: expected {URL_HELP}")
     if url.startswith(("udp", "tcp")) and not re.search(r":\d+$", url):
         raise FlighttestError(f"bad --connect URL {url!r}: a port is required ({URL_HELP})")
+    if url.startswith("serial") and not re.search(r"://.+:\d+$", url):  # MAVSDK ≥ 3 needs the baud rate
+        raise FlighttestError(f"bad --connect URL {url!r}: a baud rate is required (serial:///dev/ttyUSB0:57600)")
     return url
 
 

@@ -116,6 +116,7 @@ def _run(*argv: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     ("argv", "message"),
     [
         (["--connect", "bogus://x", "--vehicle", "x500"], "URL"),
+        (["--connect", "serial:///dev/ttyUSB0", "--vehicle", "x500"], "baud rate"),
         (["--connect", "udpin://0.0.0.0:14540"], "--vehicle is required"),
         (["--connect", "udpin://0.0.0.0:14540", "--vehicle", "x500", "--truth-onset", "1"], "need --sim"),
         (["--sim", "--vehicle", "no_such_vehicle"], "unknown vehicle"),
