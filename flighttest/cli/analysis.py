@@ -10,7 +10,7 @@ from pathlib import Path
 import pandas as pd
 from rich.table import Table
 
-from flighttest.analysis.compare import add_speedup, compare_row, primary_descent  # noqa: F401 (re-export)
+from flighttest.analysis.compare import add_speedup, compare_row
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
 

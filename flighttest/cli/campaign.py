@@ -128,7 +128,7 @@ def _clock(seconds: float) -> str:
 
 def cmd_campaign(args: argparse.Namespace) -> int:
     from flighttest.campaign.steps import RUNNERS, StepContext, StepFailed, write_configs
-    from flighttest.cli.fly import _confirm
+    from flighttest.cli.fly import confirm_go
     from flighttest.profiles import load_profile
 
     sim_opts = _validate(args)
@@ -156,7 +156,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
         ctx = StepContext(state=state, vehicle=vehicle, connect=connect, yes=args.yes,
                           stale_periods=args.stale_periods, show_panel=out.is_terminal and not args.json,
-                          confirm=_confirm, print_fn=out.print)  # fmt: skip
+                          confirm=confirm_go, print_fn=out.print)  # fmt: skip
         t0 = time.monotonic()
         stop: list[str] = []  # a Ctrl-C during a ground step: finish it, then stop
         out.rule(f"[bold]flighttest campaign — {profile.name} — {state.dir.root}")
@@ -195,13 +195,13 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             if stop and k + 1 < len(steps):
                 out.print(f"[yellow]stopped after '{step}' (Ctrl-C)[/]; run the same command again to go on")
                 raise KeyboardInterrupt
-    return _final(state, profile, args.json, out)
+    return _final(state, args.json, out)
 
 
 @contextlib.contextmanager
 def _stop_after_step(stop: list[str], out: Console):
-    """Ctrl-C during a ground step asks to stop after it (IPOPT, inside the planner, would swallow the
-    interrupt and go on anyway); a second Ctrl-C stops at once."""
+    """Ctrl-C (or SIGTERM) during a ground step asks to stop after it (IPOPT, inside the planner, would
+    swallow the interrupt and go on anyway); a second one stops at once."""
 
     def on_sigint(signum, frame) -> None:
         if stop:
@@ -209,11 +209,12 @@ def _stop_after_step(stop: list[str], out: Console):
         stop.append("sigint")
         out.print("[yellow]Ctrl-C: stopping after this step (Ctrl-C again: at once)[/]")
 
-    previous = signal.signal(signal.SIGINT, on_sigint)
+    previous = {sig: signal.signal(sig, on_sigint) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _start_fake(stack: contextlib.ExitStack, state: CampaignState, vehicle: str, opts: dict, out: Console) -> str:
@@ -245,7 +246,7 @@ def _brief(step: str, o: dict[str, Any]) -> str:
     return ""
 
 
-def _final(state: CampaignState, profile, as_json: bool, out: Console) -> int:
+def _final(state: CampaignState, as_json: bool, out: Console) -> int:
     from flighttest.campaign.summary import headlines, read_summary, table_rows
 
     if not state.done("report"):

@@ -114,7 +114,7 @@ def build_request(args: argparse.Namespace, mission: str | None = None, module: 
         trajectory_path=traj_path, sysid=args.sysid, yes=args.yes, dry_run=args.dry_run,
         wind_ned_mps=tuple(args.wind_ned) if args.wind_ned else None,
         log_root=args.log_dir or _default_root(), show_panel=console.is_terminal and not args.json,
-        confirm=_confirm, print_fn=(err_console.print if args.json else console.print),
+        confirm=confirm_go, print_fn=(err_console.print if args.json else console.print),
     )  # fmt: skip
 
 
@@ -124,7 +124,7 @@ def _default_root() -> Path:
     return default_log_root()
 
 
-def _confirm(pre) -> bool:
+def confirm_go(pre) -> bool:
     from rich.prompt import Confirm
 
     warn = [c for c in pre.checks if c.status == "warn"]
