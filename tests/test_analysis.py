@@ -379,3 +379,18 @@ def test_descents_of_an_oscillating_probe_do_not_overlap():
     assert (descents["end_s"].to_numpy()[:-1] <= descents["start_s"].to_numpy()[1:]).all()
     last = descents.iloc[-1]
     assert last["height_m"] == pytest.approx(4.0, abs=0.1) and last["settled"]
+
+
+def test_flown_descent_is_rest_to_rest_from_the_events():
+    from flighttest.analysis.compare import add_speedup, compare_row, flown_descent
+
+    events = [{"event": "phase", "phase": "stream", "t_s": 12.0}, {"event": "stream_start", "t_s": 12.1},
+              {"event": "descent_reached", "t_s": 17.9, "descent_time_s": 5.6}]  # fmt: skip
+    d = flown_descent(events)
+    assert (d["start_s"], d["end_s"], d["duration_s"]) == pytest.approx((12.1, 17.7, 5.6))
+    assert flown_descent(events[:2]) is None  # never came to rest at the end point: no time
+    empty = pd.DataFrame()
+    rows = add_speedup([compare_row("v", empty, [*events[:2], {**events[2], "descent_time_s": 8.4}]),
+                        compare_row("h", empty, events)], key="descent_time_s")  # fmt: skip
+    assert rows[1]["speedup_vs_first"] == pytest.approx(1.5)
+    assert "descent_time_s" not in compare_row("other", empty)  # logs of other tools: no such key

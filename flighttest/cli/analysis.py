@@ -222,41 +222,47 @@ def cmd_analyse(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     results, errors = _run(args.logs, args.vehicle, _seg_config(args))
-    rows = add_speedup([compare_row(r["summary"]["log"], r["descents"]) for r in results])
+    rows = [compare_row(r["summary"]["log"], r["descents"], r["events"]) for r in results]
+    # flighttest's own logs know when each descent started and came to rest: compare those; others by segment
+    basis = "descent_time_s" if rows and all(row.get("descent_time_s") for row in rows) else "duration_s"
+    for row in add_speedup(rows, key=basis):
+        row["speedup_basis"] = basis
     if args.json:
         print_json(rows)
     else:
-        t = Table(title="descent times side by side (the main descent of each flight)", title_justify="left")
-        for col in (
-            "log",
-            "mission",
-            "height m",
-            "duration s",
-            "speed-up ×",
-            "mean m/s",
-            "max m/s",
-            "inside s",
-            "near s",
-            "min margin m/s",
-            "fluct. max",
-        ):
-            t.add_column(col, justify="left" if col in ("log", "mission") else "right")
-        for row in rows:
-            t.add_row(
-                Path(row["log"]).name,
-                str(row.get("trajectory") or row.get("mission") or "–"),
-                _num(row.get("height_m")),
-                _num(row.get("duration_s")),
-                _num(row.get("speedup_vs_first")),
-                _num(row.get("mean_rate_mps")),
-                _num(row.get("max_rate_mps")),
-                _num(row.get("time_inside_s")),
-                _num(row.get("time_near_s")),
-                _num(row.get("min_margin_mps")),
-                _num(row.get("fluct_index_max"), "{:.1f}"),
-            )
+        columns = {  # header: (key, format)
+            "height m": ("height_m", "{:.2f}"),
+            "duration s": ("duration_s", "{:.2f}"),
+            "rest-to-rest s": ("descent_time_s", "{:.2f}"),
+            "speed-up ×": ("speedup_vs_first", "{:.2f}"),
+            "mean m/s": ("mean_rate_mps", "{:.2f}"),
+            "max m/s": ("max_rate_mps", "{:.2f}"),
+            "inside s": ("time_inside_s", "{:.2f}"),
+            "near s": ("time_near_s", "{:.2f}"),
+            "min margin m/s": ("min_margin_mps", "{:.2f}"),
+            "fluct. max": ("fluct_index_max", "{:.1f}"),
+        }
+        names = [Path(row["log"]).name for row in rows]
+        kinds = [str(row.get("trajectory") or row.get("mission") or "–") for row in rows]
+        title = "descent times side by side (the main descent of each flight)"
+        t = Table(title=title, title_justify="left")
+        if console.width < 140 and len(rows) <= 6:  # a narrow terminal: one column per flight
+            t.add_column("")
+            for name, kind in zip(names, kinds):
+                t.add_column(f"{name}\n{kind}", justify="right")
+            for header, (key, fmt) in columns.items():
+                t.add_row(header, *(_num(row.get(key), fmt) for row in rows))
+        else:
+            for col in ("log", "mission", *columns):
+                t.add_column(col, justify="left" if col in ("log", "mission") else "right")
+            for name, kind, row in zip(names, kinds, rows):
+                t.add_row(name, kind, *(_num(row.get(key), fmt) for key, fmt in columns.values()))
         console.print(t)
-        console.print("speed-up × = duration of the first log's descent / this descent's duration")
+        console.print(
+            "duration: the main descent found in the log; rest-to-rest: flighttest's own logs, from the first "
+            "setpoint of the descent to rest at its end point; speed-up × = the first log's "
+            f"{'rest-to-rest time' if basis == 'descent_time_s' else 'duration'} / this one's"
+        )
     return 2 if errors else 0
 
 
