@@ -133,8 +133,9 @@ def analyse_run(run: dict[str, Any], out_dir: Path) -> dict[str, Any]:
         s: dict[str, Any] = {"status": rec["status"], "elapsed_s": elapsed, "start_unix_s": start,
                              "outcome": rec.get("outputs", {}).get("outcome")}  # fmt: skip
         log_dir = rec.get("outputs", {}).get("log_dir")
-        if name in FLIGHT_STEPS and log_dir and (Path(log_dir) / "events.jsonl").is_file():
-            phases = flight_phases(Path(log_dir), start, start + elapsed)
+        log_dir = out_dir / log_dir if log_dir else None  # stored relative to the campaign folder
+        if name in FLIGHT_STEPS and log_dir and (log_dir / "events.jsonl").is_file():
+            phases = flight_phases(log_dir, start, start + elapsed)
             s["phases_s"] = phases
             # the descent: stream start → target height reached; the probe has none (its sweep is stopped
             # by the detector), so there it is the stream phase, the sweep

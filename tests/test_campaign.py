@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -62,6 +63,7 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     steps = _steps(out)
     assert all(steps[x]["status"] == "done" for x in STEPS)
     assert [p.name for p in (out / "flights").iterdir() if p.name.endswith("-probe")] == [Path(probe_log).name]
+    assert not Path(probe_log).is_absolute()  # paths relative to the folder: a campaign can be moved
     assert steps["probe"]["outputs"]["log_dir"] == probe_log
     assert (out / "plans" / "helix.csv").stat().st_mtime == plan_mtime  # not planned again
 
@@ -75,7 +77,7 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     for name in ("vertical", "helix"):
         assert flights[name]["outcome"] == "completed"
         assert flights[name]["guard_aborts"] == 0
-        guard = pd.read_csv(Path(steps[name]["outputs"]["log_dir"]) / "guard.csv")
+        guard = pd.read_csv(out / steps[name]["outputs"]["log_dir"] / "guard.csv")
         assert len(guard) > 100 and not (guard["action"] == "abort").any()
     assert flights["helix"]["height_m"] == pytest.approx(flights["vertical"]["height_m"], abs=0.3)
     assert s["speedup_helix_vs_vertical"] == pytest.approx(s["vertical_descent_s"] / s["helix_descent_s"])
@@ -99,12 +101,14 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     assert again.returncode == 0, again.stderr[-2000:]
     assert json.loads(again.stdout)["helix_descent_s"] == s["helix_descent_s"]
     assert len(list((out / "sim").glob("truth-*.csv"))) == 2  # no fake started this time
-    # one step alone, from the files of the earlier ones: the report is written again
-    summary_md = out / "report" / "summary.md"
-    summary_md.unlink()
-    only = subprocess.run(_campaign(out, "--only", "report"), capture_output=True, text=True, timeout=120, env=env)
+    # one step alone, from the files of the earlier ones, in the folder moved elsewhere: the report again
+    moved = tmp_path / "copied_to_the_office"
+    shutil.move(out, moved)
+    (moved / "report" / "summary.md").unlink()
+    only = subprocess.run(_campaign(moved, "--only", "report"), capture_output=True, text=True, timeout=120, env=env)
     assert only.returncode == 0, only.stderr[-2000:]
-    assert summary_md.stat().st_size > 0
+    assert json.loads(only.stdout)["speedup_helix_vs_vertical"] == pytest.approx(s["speedup_helix_vs_vertical"])
+    assert (moved / "report" / "summary.md").stat().st_size > 0
 
 
 def _run(*argv: str, cwd: Path | None = None) -> subprocess.CompletedProcess:

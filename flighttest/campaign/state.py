@@ -30,6 +30,7 @@ TITLES = {
     "report": "compare the descents and write the report",
 }
 STATE_FILE = "campaign.json"
+PATH_KEYS = frozenset({"log_dir", "profile", "identify_json", "vertical", "helix", "report_dir", "files"})
 FORMAT = "flighttest-campaign/1"
 
 
@@ -127,6 +128,22 @@ class CampaignState:
             raise FlighttestError(f"step '{step}' has not completed in {self.dir.root}: run it first (--only {step})")
         return rec.outputs[key]
 
+    def path(self, step: str, key: str) -> Path:
+        """An earlier step's file (stored relative to the folder, so a campaign can be moved or copied)."""
+        return self.dir.root / self.output(step, key)
+
+    def maybe_path(self, step: str, key: str) -> Path | None:
+        value = self.steps[step].outputs.get(key)
+        return self.dir.root / value if value else None
+
+    def _relative(self, value: Any) -> Any:
+        if isinstance(value, list):
+            return [self._relative(v) for v in value]
+        try:
+            return str(Path(value).resolve().relative_to(self.dir.root.resolve()))
+        except (TypeError, ValueError):
+            return value
+
     def to_run(self, only: str | None = None, start: str | None = None) -> list[str]:
         """The steps this invocation runs: ``only`` one step, everything from ``start`` on, or (resuming)
         everything from the first step not done — a re-run step makes every later one stale."""
@@ -168,6 +185,6 @@ class CampaignState:
         rec = self.steps[step]
         rec.status = status
         rec.elapsed_s = round(time.time() - (rec.started_unix_s or time.time()), 3)
-        rec.outputs = outputs or {}
+        rec.outputs = {k: self._relative(v) if k in PATH_KEYS else v for k, v in (outputs or {}).items()}
         rec.error = error
         self.save()

@@ -59,7 +59,7 @@ class StepContext:
         return cfg
 
     def identified_profile(self) -> VehicleProfile:
-        return load_profile(self.state.output("identify", "profile"))
+        return load_profile(self.state.path("identify", "profile"))
 
 
 def write_configs(d, overwrite: bool = False) -> list[Path]:
@@ -126,7 +126,7 @@ def run_identify(ctx: StepContext) -> dict[str, Any]:
     from flighttest.analysis.loaders import load_log
 
     profile = load_profile(ctx.vehicle)
-    log_dir = ctx.state.output("probe", "log_dir")
+    log_dir = ctx.state.path("probe", "log_dir")
     try:
         onset = identify_onset(load_log(log_dir), profile)
     except FlighttestError as exc:
@@ -156,7 +156,7 @@ def run_plan(ctx: StepContext) -> dict[str, Any]:
 
 def run_descent(ctx: StepContext, mission: str) -> dict[str, Any]:
     profile = ctx.identified_profile()
-    path = ctx.state.output("plan", mission)
+    path = ctx.state.path("plan", mission)
     traj = Trajectory.load(path, profile)
     return _fly(ctx, mission, profile, ctx.config(mission), traj, path)
 

@@ -7,10 +7,12 @@ same figures for scripts; ``compare.csv`` is ``flighttest compare`` of the two d
 
 from __future__ import annotations
 
-import csv
+import json
 import math
 from pathlib import Path
 from typing import Any
+
+import pandas as pd
 
 from flighttest import __version__
 from flighttest.analysis.compare import add_speedup, compare_row
@@ -56,12 +58,12 @@ def campaign_summary(state: CampaignState, profile: VehicleProfile, rows: dict[s
         "identified_w_allow_mps": ident.get("w_onset_mps"),
         "identified_uncertainty_mps": ident.get("uncertainty_mps"),
         "prior_w_allow_mps": ident.get("prior_w_allow_mps"),
-        "identified_profile": ident.get("profile"),
+        "identified_profile": str(state.maybe_path("identify", "profile")),
         "vertical_descent_s": vert.get("descent_time_s"),
         "helix_descent_s": helix.get("descent_time_s"),
         "speedup_helix_vs_vertical": helix.get("speedup_vs_vertical"),
         "flights": [rows[s] for s in DESCENTS if s in rows],
-        "probe_log": state.steps["probe"].outputs.get("log_dir"),
+        "probe_log": str(state.maybe_path("probe", "log_dir")),
         "steps_elapsed_s": {s: state.steps[s].elapsed_s for s in STEPS},
         "report": str(state.dir.report),
         "flighttest_version": __version__,
@@ -125,22 +127,18 @@ def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict
     out_dir.mkdir(parents=True, exist_ok=True)
     analyses, rows = {}, {}
     for step in FLIGHTS:
-        rec = state.steps[step]
-        if not rec.outputs.get("log_dir"):
+        log_dir = state.maybe_path(step, "log_dir")
+        if log_dir is None:
             continue
-        analyses[step] = analyse(load_log(rec.outputs["log_dir"]), profile.path)
-        a, o = analyses[step], rec.outputs
+        analyses[step] = a = analyse(load_log(log_dir), profile.path)
+        o = state.steps[step].outputs
         rows[step] = {"step": step, "outcome": o.get("outcome"), "guard_aborts": o.get("guard_aborts"),
-                      **compare_row(o["log_dir"], a.descents, a.log.events)}  # fmt: skip
+                      **compare_row(str(log_dir), a.descents, a.log.events)}  # fmt: skip
     if "vertical" not in analyses or "helix" not in analyses:
         raise FlighttestError("the report needs both the vertical and the helix flight")
     for row in add_speedup([rows["vertical"], rows["helix"]], key="descent_time_s"):
         row["speedup_vs_vertical"] = row.pop("speedup_vs_first")
-    with (out_dir / "compare.csv").open("w", newline="", encoding="utf-8") as f:
-        keys = list(dict.fromkeys(k for s in ("vertical", "helix") for k in rows[s]))
-        w = csv.DictWriter(f, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows[s] for s in ("vertical", "helix"))
+    pd.DataFrame([rows[s] for s in DESCENTS]).to_csv(out_dir / "compare.csv", index=False)
     onsets = {}
     if "probe" in analyses:
         onsets[str(analyses["probe"].log.path)] = identify_onset(analyses["probe"].log, profile)
@@ -157,8 +155,6 @@ def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict
 
 
 def read_summary(report_dir: Path) -> dict[str, Any]:
-    import json
-
     path = report_dir / "summary.json"
     try:
         return json.loads(path.read_text(encoding="utf-8"))
