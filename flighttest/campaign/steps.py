@@ -133,7 +133,7 @@ def run_identify(ctx: StepContext) -> dict[str, Any]:
         raise StepFailed(f"no VRS onset in the probe's log {log_dir}: {exc}") from None
     target = ctx.dir.vehicles / f"{profile.name}.toml"
     write_w_allow(profile, onset.w_onset_mps, onset.provenance(log_dir, "flighttest campaign"), target=target)
-    summary = {"probe_log": log_dir, "vehicle": profile.name, "prior_w_allow_mps": profile.w_allow_mps,
+    summary = {"probe_log": str(log_dir), "vehicle": profile.name, "prior_w_allow_mps": profile.w_allow_mps,
                **onset.summary(), "profile": str(target)}  # fmt: skip
     write_json_atomic(ctx.dir.identify_file, summary)
     return {"w_onset_mps": onset.w_onset_mps, "uncertainty_mps": onset.uncertainty_mps,
@@ -158,7 +158,7 @@ def run_descent(ctx: StepContext, mission: str) -> dict[str, Any]:
     profile = ctx.identified_profile()
     path = ctx.state.path("plan", mission)
     traj = Trajectory.load(path, profile)
-    return _fly(ctx, mission, profile, ctx.config(mission), traj, path)
+    return _fly(ctx, mission, profile, ctx.config(mission), traj, str(path))
 
 
 def run_report(ctx: StepContext) -> dict[str, Any]:
