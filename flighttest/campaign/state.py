@@ -175,11 +175,9 @@ class CampaignState:
                     f"{self.dir.root} (run the campaign without --only/--from to resume from the start)"
                 )
 
-    def begin(self, step: str) -> StepRecord:
-        rec = StepRecord(status="running", started_unix_s=time.time())
-        self.steps[step] = rec
+    def begin(self, step: str) -> None:
+        self.steps[step] = StepRecord(status="running", started_unix_s=time.time())
         self.save()
-        return rec
 
     def finish(self, step: str, status: str, outputs: dict[str, Any] | None = None, error: str | None = None) -> None:
         rec = self.steps[step]

@@ -16,7 +16,7 @@ from typing import Any
 
 import pandas as pd
 
-from flighttest.campaign.state import CampaignState
+from flighttest.campaign.state import CampaignDir, CampaignState
 from flighttest.errors import FlighttestError
 from flighttest.flightlog import write_json_atomic
 from flighttest.mission_scripts import MISSIONS, load_mission_module, mission_config_path
@@ -49,7 +49,7 @@ class StepContext:
     print_fn: Callable[[Any], None] = print
 
     @property
-    def dir(self):
+    def dir(self) -> CampaignDir:
         return self.state.dir
 
     def config(self, mission: str) -> MissionConfig:
@@ -62,17 +62,16 @@ class StepContext:
         return load_profile(self.state.path("identify", "profile"))
 
 
-def write_configs(d, overwrite: bool = False) -> list[Path]:
+def write_configs(d: CampaignDir) -> None:
     """The missions' own TOML files, copied into the campaign (comments and all) unless already there,
     so edits made for this campaign survive a resume. The vertical baseline starts at the helix's
     height and descends as far, so the two descent times compare like for like (the paper: 5 m)."""
     d.config.mkdir(parents=True, exist_ok=True)
     helix = load_mission_config(mission_config_path("helix"))
-    written = []
     for mission in MISSIONS:
         src = mission_config_path(mission)
         dst = d.config / src.name
-        if dst.exists() and not overwrite:
+        if dst.exists():
             continue
         text = src.read_text(encoding="utf-8")
         if mission == "vertical":
@@ -81,10 +80,8 @@ def write_configs(d, overwrite: bool = False) -> list[Path]:
             text = re.sub(r"(?m)^start_height_m\s*=.*$", f"start_height_m = {h0!r}{same}", text)
             text = re.sub(r"(?m)^descent_m\s*=.*$", f"descent_m = {dh!r}{same}", text)
         dst.write_text(text, encoding="utf-8")
-        written.append(dst)
     for mission in MISSIONS:  # validate now, before anything flies
         load_mission_config(d.config / mission_config_path(mission).name)
-    return written
 
 
 def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfig, traj: Trajectory,

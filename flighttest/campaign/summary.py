@@ -147,7 +147,6 @@ def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict
                                probe=analyses.get("probe"))  # fmt: skip
     plot_descent_comparison(analyses["vertical"], analyses["helix"], out_dir / "descent_times.png")
     summary = campaign_summary(state, profile, rows)
-    summary["steps_elapsed_s"]["report"] = None  # this step is still running; campaign.json has its time
     write_json_atomic(out_dir / "summary.json", summary)
     (out_dir / "summary.md").write_text(summary_markdown(summary), encoding="utf-8")
     return {"report_dir": str(out_dir), "files": [str(out_dir / f) for f in REPORT_FILES],

@@ -104,13 +104,14 @@ def _validate(args: argparse.Namespace) -> dict[str, Any]:
         raise FlighttestError("--sim-wind must be three finite numbers")
     params: dict[str, float] = dict(SIM_DEFAULT_PARAMS)
     for item in args.sim_param:
-        name, sep, value = item.partition("=")
+        name, _, value = item.partition("=")
         try:
-            params[name.strip()] = float(value)
+            number = float(value)
         except ValueError:
-            sep = ""
-        if not sep or not name.strip():
+            number = None
+        if not name.strip() or number is None:
             raise FlighttestError(f"--sim-param must be NAME=NUMBER (got {item!r})")
+        params[name.strip()] = number
     opts: dict[str, Any] = {"param": params}
     if args.truth_onset is not None:
         opts["truth_onset"] = args.truth_onset
