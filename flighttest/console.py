@@ -26,7 +26,12 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
+json_printed = False  # set once a command printed its JSON: the CLI's {"error"} must not follow it
+
+
 def print_json(data: Any) -> None:
     """Machine-readable output: plain JSON on stdout, nothing else."""
+    global json_printed
     sys.stdout.write(json.dumps(_clean(data), indent=2) + "\n")
     sys.stdout.flush()
+    json_printed = True

@@ -11,6 +11,7 @@ absence marks a flight that did not end cleanly.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -33,6 +34,11 @@ GUARD_COLUMNS = (
     "t_s", "unix_s", "verdict", "w_mps", "u_mps", "margin_mps", "predicted_margin_mps", "action",
     "reason", "vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "wn_mps", "we_mps", "wd_mps", "alt_m",
 )  # fmt: skip
+
+
+# every file a flight log folder may hold (docs/CONTRACTS.md), for ``FlightLog.discard``
+LOG_FILES = frozenset({"meta.json", "flight.tlog", "setpoints.csv", "guard.csv", "events.jsonl", "preflight.json",
+                       "params.json", "trajectory.csv", "trajectory.json", "summary.json"})  # fmt: skip
 
 
 def default_log_root() -> Path:
@@ -59,6 +65,8 @@ class FlightLog:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in mission) or "flight"
         base = root / f"{stamp}-{safe}"
+        # the folders this log creates above its own: a discarded log takes them away again
+        self._made_parents = [p for p in (root, *root.parents) if not p.exists()]
         path, n = base, 1
         while True:
             try:
@@ -148,6 +156,13 @@ class FlightLog:
     def write_preflight(self, data: Any) -> None:
         write_json_atomic(self.dir / "preflight.json", data)
 
+    def write_params(self, snapshot: dict[str, Any]) -> Path:
+        """``params.json``: the autopilot parameters this flight flew with
+        (``flighttest.analysis.params.snapshot`` builds the document)."""
+        path = self.dir / "params.json"
+        write_json_atomic(path, snapshot)
+        return path
+
     def write_summary(self, summary: dict[str, Any]) -> None:
         write_json_atomic(self.dir / "summary.json", {**summary, "log_dir": str(self.dir)})
 
@@ -172,6 +187,21 @@ class FlightLog:
         for f in self._files:
             f.close()
         self.closed = True
+
+    def discard(self) -> None:
+        """Remove the folder of a flight that never started (nothing connected, nothing flown): its empty
+        ``.tlog`` and header-only CSVs hold nothing and would trip the analysis tools up later. Only
+        the files a flight log writes go; anything else keeps the folder (and the folders above it)."""
+        self.close()
+        for p in self.dir.iterdir():
+            if p.name in LOG_FILES or p.name.endswith(".tmp"):
+                with contextlib.suppress(OSError):
+                    p.unlink()
+        for d in (self.dir, *self._made_parents):
+            try:
+                d.rmdir()
+            except OSError:  # not empty (or already gone): leave it and everything above it
+                break
 
 
 def _lib_versions() -> dict[str, str]:

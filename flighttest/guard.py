@@ -370,6 +370,10 @@ CMD_RECOVER = "recover"
 CMD_HOLD = "hold"
 CMD_LAND = "land"
 
+# MAVSDK flight modes in which a person flies the vehicle: seen during the ladder, flighttest stops
+# sending anything (README "Aborting by hand": the pilot took over)
+PILOT_MODES = frozenset({"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE"})
+
 
 @dataclass(frozen=True)
 class LadderTiming:
@@ -378,7 +382,9 @@ class LadderTiming:
     arrested_for_s: float = 0.3  # … held this long
     hold_confirm_s: float = 3.0  # Hold must show in the flight mode within this, else Land
     hold_dwell_s: float = 2.0  # time in Hold before landing
-    land_retry_s: float = 3.0  # re-send Land if the mode does not show it
+    land_retry_s: float = 3.0  # re-send Land if the mode does not show it (or cannot be seen)
+    land_min_resend_s: float = 0.5  # a newly stale link re-sends Land at once, but not more often than this
+    link_give_up_s: float = 5.0  # link lost and nothing heard this long: the vehicle's failsafe is in charge
     land: bool = True  # False (--no-land): the ladder ends in Hold
 
 
@@ -391,6 +397,7 @@ class LadderObservation:
     mode: str = ""  # MAVSDK FlightMode name, e.g. "OFFBOARD", "HOLD", "LAND"
     landed: bool = False
     link_ok: bool = True
+    heard_age_s: float = 0.0  # since anything was last heard from the vehicle (a state sample)
 
 
 @dataclass
@@ -405,6 +412,7 @@ class AbortLadder:
     _arrested_since: float | None = None
     _hold_seen_t: float | None = None
     _last_land_t: float = -math.inf
+    _land_watch: str = ""  # in Land: "" (telemetry fine), "telemetry stale" or "link lost"
     history: list[tuple[float, str, str]] = field(default_factory=list)
 
     @property
@@ -446,8 +454,21 @@ class AbortLadder:
             return CMD_LAND
         return None
 
+    def note(self, t_s: float, why: str) -> None:
+        """A decision that keeps the rung (re-sending Land, telemetry lost or back): into the history."""
+        self.history.append((t_s, self.rung.name, why))
+
     def step(self, ob: LadderObservation) -> str | None:
         tm, t = self.timing, ob.t_s
+        if self.rung in (Rung.NOMINAL, Rung.DONE):
+            return None
+        # on every rung: a pilot mode means a person has the sticks, and anything sent would fight them
+        if ob.mode in PILOT_MODES:
+            return self._enter(t, Rung.DONE, f"pilot took over ({ob.mode}): sending nothing more")
+        # nothing can reach the vehicle any more: PX4's own failsafe (offboard loss, data-link loss) flies it
+        if not ob.link_ok and ob.heard_age_s > tm.link_give_up_s:
+            why = f"link lost and nothing heard for {ob.heard_age_s:.1f} s (> {tm.link_give_up_s:g} s)"
+            return self._enter(t, Rung.DONE, f"{why}: the vehicle's own failsafe is in charge")
         if self.rung == Rung.RECOVER:
             arrested = ob.telemetry_fresh and ob.region_ok and ob.vd_mps <= tm.arrested_vd_mps
             if arrested:
@@ -476,10 +497,30 @@ class AbortLadder:
                     return self._enter(t, Rung.DONE, why)
                 return self._enter(t, Rung.LAND, why)
         elif self.rung == Rung.LAND:
-            if ob.landed:
-                return self._enter(t, Rung.DONE, "landed")
-            if ob.mode != "LAND" and t - self._last_land_t >= tm.land_retry_s:
+            return self._step_land(ob)
+        return None
+
+    def _step_land(self, ob: LadderObservation) -> str | None:
+        """Land keeps watching: with stale telemetry or a lost link PX4 is (most likely) landing on its
+        own and there is nothing better to ask for, so Land is re-sent — at once when it starts, then
+        every ``land_retry_s`` — and each change is noted; ``step`` gives up on a link gone for good."""
+        tm, t = self.timing, ob.t_s
+        if ob.landed:
+            return self._enter(t, Rung.DONE, "landed")
+        watch = "link lost" if not ob.link_ok else "telemetry stale" if not ob.telemetry_fresh else ""
+        if watch != self._land_watch:
+            was, self._land_watch = self._land_watch, watch
+            if not watch:
+                self.note(t, f"{was} during Land is over: telemetry back (mode {ob.mode or 'unknown'})")
+            elif t - self._last_land_t >= tm.land_min_resend_s:
                 self._last_land_t = t
-                self.history.append((t, "LAND", f"re-sending Land (mode {ob.mode or 'unknown'})"))
+                self.note(t, f"{watch} during Land: re-sending Land")
                 return CMD_LAND
+            else:
+                self.note(t, f"{watch} during Land: Land was just sent, re-sending in {tm.land_retry_s:g} s")
+        # the mode cannot be trusted while the telemetry is stale: keep asking
+        if (watch or ob.mode != "LAND") and t - self._last_land_t >= tm.land_retry_s:
+            self._last_land_t = t
+            self.note(t, f"re-sending Land ({watch or 'mode ' + (ob.mode or 'unknown')})")
+            return CMD_LAND
         return None

@@ -15,9 +15,11 @@ Rules this module keeps (NOTES §4):
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import re
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,16 +30,158 @@ from flighttest.errors import FlighttestError
 URL_RE = re.compile(r"^(udpin|udpout|tcpin|tcpout|udp|tcp|serial|serial_flowcontrol)://.+$")
 URL_HELP = "udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT or serial:///dev/ttyUSB0:57600"
 GCS_SYSID = 245  # QGroundControl uses 255; MAVSDK's ground-station default is 245
+LISTEN_SCHEMES = ("udpin", "tcpin", "udp")  # MAVSDK's deprecated udp:// listens, tcp:// connects
+SERIAL_SCHEMES = ("serial", "serial_flowcontrol")
+MAX_BAUD = 20_000_000  # beyond any UART a flight controller has (PX4 tops out at 3 Mbit/s)
+RESOLVE_TIMEOUT_S = 3.0
+_HOST_LABEL_RE = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
+
+
+def _bad(url: str, why: str) -> FlighttestError:
+    shown = repr(url) if len(url) <= 120 else repr(url[:100]) + f"… ({len(url)} characters)"
+    return FlighttestError(f"bad --connect URL {shown}: {why}")
+
+
+def _split_host_port(url: str, rest: str) -> tuple[str, int]:
+    host, sep, port = rest.rpartition(":")
+    if not sep or not port:
+        raise _bad(url, f"a port is required ({URL_HELP})")
+    if not port.isdigit() or not port.isascii():
+        raise _bad(url, f"port {port!r} is not a number")
+    if not 1 <= int(port) <= 65535:
+        raise _bad(url, f"port {int(port)} is out of range (1..65535)")
+    if not host and not url.startswith("udp://"):  # MAVSDK's old udp://:PORT = every interface
+        raise _bad(url, "a host is required (udpin://0.0.0.0:PORT listens on every interface)")
+    return host or "0.0.0.0", int(port)
+
+
+def _is_ipv4(host: str) -> bool:
+    import ipaddress
+
+    try:
+        ipaddress.IPv4Address(host)
+    except ValueError:
+        return False
+    return True
 
 
 def check_url(url: str) -> str:
-    if not URL_RE.match(url or ""):
-        raise FlighttestError(f"bad --connect URL {url!r}: expected {URL_HELP}")
-    if url.startswith(("udp", "tcp")) and not re.search(r":\d+$", url):
-        raise FlighttestError(f"bad --connect URL {url!r}: a port is required ({URL_HELP})")
-    if url.startswith("serial") and not re.search(r"://.+:\d+$", url):  # MAVSDK ≥ 3 needs the baud rate
-        raise FlighttestError(f"bad --connect URL {url!r}: a baud rate is required (serial:///dev/ttyUSB0:57600)")
+    """The URL's syntax as MAVSDK 4 takes it, checked without touching the network or devices: one
+    line naming what is wrong instead of MAVSDK's own log lines or a 15 s wait for nobody."""
+    if not isinstance(url, str) or not url:
+        raise _bad(str(url or ""), f"expected {URL_HELP}")
+    # a pasted newline or tab would reach MAVSDK as part of the device name or port
+    if any(c.isspace() or not c.isprintable() for c in url):
+        raise _bad(url, "it contains whitespace or a control character")
+    if not URL_RE.match(url):
+        raise _bad(url, f"expected {URL_HELP}")
+    scheme, _, rest = url.partition("://")
+    if scheme in SERIAL_SCHEMES:  # MAVSDK ≥ 3 needs the baud rate
+        device, sep, baud = rest.rpartition(":")
+        if not sep or not device or not baud.isdigit() or not baud.isascii():
+            raise _bad(url, "a device and a baud rate are required (serial:///dev/ttyUSB0:57600)")
+        if not 50 <= int(baud) <= MAX_BAUD:
+            raise _bad(url, f"baud rate {int(baud)} is out of range (50..{MAX_BAUD})")
+        return url
+    host, _port = _split_host_port(url, rest)
+    if host.startswith("["):
+        raise _bad(url, "IPv6 addresses are not supported by MAVSDK: use an IPv4 address or a host name")
+    if scheme in LISTEN_SCHEMES:
+        if not _is_ipv4(host):
+            raise _bad(url, f"{scheme}:// listens on a local IPv4 address (0.0.0.0 = every interface), not {host!r}")
+        return url
+    if all(part.isdigit() for part in host.split(".")):
+        if not _is_ipv4(host):
+            raise _bad(url, f"{host!r} is not an IPv4 address")
+    elif len(host) > 253 or not all(_HOST_LABEL_RE.match(p) for p in host.rstrip(".").split(".")):
+        raise _bad(url, f"{host!r} is not a host name or IPv4 address")
     return url
+
+
+def check_connection(url: str) -> str:
+    """What ``check_url`` cannot see from the text: the host name resolves, the listening address is
+    one of this machine's, the serial device exists and may be opened. Run before MAVSDK starts, so
+    a link that cannot work is refused at once rather than after the connect timeout."""
+    import os
+    import socket
+    import stat
+    import threading
+
+    check_url(url)
+    scheme, _, rest = url.partition("://")
+    if scheme in SERIAL_SCHEMES:
+        device = rest.rpartition(":")[0]
+        if not device.startswith("/"):
+            if os.name == "posix":  # serial://dev/ttyUSB0 opens a relative path: two slashes, not three
+                raise _bad(url, "the serial device must be a path such as /dev/ttyUSB0 (serial:///dev/ttyUSB0:57600)")
+            return url  # COM3 on Windows: nothing to stat
+        try:
+            st = os.stat(device)
+        except OSError as exc:
+            raise _bad(url, f"serial device {device}: {exc.strerror}") from None
+        if not stat.S_ISCHR(st.st_mode):
+            raise _bad(url, f"{device} is not a serial device")
+        if not os.access(device, os.R_OK | os.W_OK):
+            raise _bad(url, f"no permission to open {device} (on Linux: add yourself to the dialout group)")
+        return url
+    host, port = _split_host_port(url, rest)
+    if scheme in LISTEN_SCHEMES:
+        kind = socket.SOCK_STREAM if scheme == "tcpin" else socket.SOCK_DGRAM
+        try:  # port 0: only whether the address is ours, not whether the port is free right now
+            with socket.socket(socket.AF_INET, kind) as s:
+                s.bind((host, 0))
+        except OSError as exc:
+            raise _bad(url, f"cannot listen on {host} ({exc.strerror}): not an address of this machine") from None
+        return url
+    if _is_ipv4(host):
+        return url
+    # getaddrinfo cannot be interrupted: resolve in a daemon thread and stop waiting after a while
+    found: list[Any] = []
+
+    def resolve() -> None:
+        try:
+            found.append(socket.getaddrinfo(host, port, socket.AF_INET))
+        except (OSError, UnicodeError) as exc:
+            found.append(exc)
+
+    t = threading.Thread(target=resolve, name="resolve", daemon=True)
+    t.start()
+    t.join(RESOLVE_TIMEOUT_S)
+    if not found:
+        raise _bad(url, f"host name {host!r} did not resolve within {RESOLVE_TIMEOUT_S:g} s")
+    if isinstance(found[0], BaseException):
+        why = getattr(found[0], "strerror", None) or str(found[0])
+        raise _bad(url, f"host name {host!r} does not resolve ({why})")
+    return url
+
+
+# -- MAVSDK's own log -------------------------------------------------------------------------------
+# MAVSDK's C++ core prints every log line (version banner, "trying to reconnect..." once a second)
+# straight to stderr, which buries our one-line errors and the live panel. One process-wide
+# subscription swallows them all and hands each to the links listening (their flight log); the
+# last errors go into the message when a connection fails.
+_log_sinks: list[Callable[[str, str], None]] = []
+_log_installed = False
+
+
+def quiet_mavsdk_log() -> None:
+    """Route MAVSDK's log lines to ``_log_sinks`` instead of stderr (idempotent)."""
+    global _log_installed
+    if _log_installed:
+        return
+    from mavsdk.logging import log_subscribe
+
+    def handler(level, message: str, file: str | None, line: int) -> bool:
+        # runs on a MAVSDK thread; it must never raise (MAVSDK would print the error) or block
+        try:
+            for sink in tuple(_log_sinks):
+                sink(getattr(level, "name", str(level)), message)
+        except Exception:
+            pass
+        return True  # True: MAVSDK does not print it itself
+
+    log_subscribe(handler)
+    _log_installed = True
 
 
 @dataclass
@@ -123,6 +267,9 @@ class VehicleLink:
         self._inflight: set[asyncio.Task] = set()
         self.target_sysid: int | None = None
         self.autopilot_sysids: list[int] = []
+        self.mavsdk_errors: deque[str] = deque(maxlen=3)  # MAVSDK's latest WARN/ERROR lines
+        self._log_seen: dict[str, int] = {}
+        self._loop: asyncio.AbstractEventLoop | None = None
 
     # -- lifecycle ---------------------------------------------------------------------------------
     async def __aenter__(self) -> VehicleLink:
@@ -139,6 +286,11 @@ class VehicleLink:
     async def open(self) -> None:
         from mavsdk.asyncio import ComponentType, Configuration, ForwardingOption, Mavsdk, MavsdkConnectionError
 
+        check_connection(self.url)  # before MAVSDK starts: a link that cannot work fails in a moment
+        quiet_mavsdk_log()
+        self._loop = asyncio.get_running_loop()
+        if self._on_mavsdk_log not in _log_sinks:
+            _log_sinks.append(self._on_mavsdk_log)
         self._mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
         if self.tlog_path is not None:
             from flighttest.tlog import TlogRecorder
@@ -152,10 +304,12 @@ class VehicleLink:
                     "connect tlog recorder", 10.0,
                 )  # fmt: skip
         except MavsdkConnectionError as exc:
-            raise FlighttestError(f"cannot open {self.url}: {exc}") from None
+            raise FlighttestError(f"cannot open {self.url}: {exc}{self._mavsdk_says()}") from None
         first = await self._mavsdk.first_autopilot(self.connect_timeout_s)
         if first is None:
-            raise FlighttestError(f"no autopilot answered on {self.url} within {self.connect_timeout_s:g} s")
+            raise FlighttestError(
+                f"no autopilot answered on {self.url} within {self.connect_timeout_s:g} s{self._mavsdk_says()}"
+            )
         # other autopilots on the same link show up within a heartbeat period or so
         await asyncio.sleep(self.discover_s)
         systems = await self.call(self._mavsdk.get_systems(), "list systems", 5.0)
@@ -192,6 +346,20 @@ class VehicleLink:
         self.offboard = OffboardAsync(self.system)
         self.param = ParamAsync(self.system)
 
+    def _on_mavsdk_log(self, level: str, message: str) -> None:
+        """A MAVSDK log line (on MAVSDK's thread): WARN and ERROR kept for error messages and, once per
+        distinct text (repeats counted), written to the flight log from the event loop."""
+        if level not in ("WARN", "ERROR"):
+            return
+        self.mavsdk_errors.append(message)
+        n = self._log_seen[message] = self._log_seen.get(message, 0) + 1
+        if n == 1 and len(self._log_seen) <= 100 and self._loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop is closed: nothing left to log into
+                self._loop.call_soon_threadsafe(self._on_event, "mavsdk_log", {"level": level, "message": message})
+
+    def _mavsdk_says(self) -> str:
+        return f" (MAVSDK: {self.mavsdk_errors[-1]})" if self.mavsdk_errors else ""
+
     async def close(self) -> None:
         """Stop subscriptions, wait for blocking calls, destroy plugins and Mavsdk, stop the recorder."""
         for t in self._sub_tasks:
@@ -212,6 +380,11 @@ class VehicleLink:
         if self._mavsdk is not None:
             self._mavsdk.destroy()
             self._mavsdk = None
+        if self._on_mavsdk_log in _log_sinks:
+            _log_sinks.remove(self._on_mavsdk_log)
+        repeats = {m: n for m, n in self._log_seen.items() if n > 1}
+        if repeats:
+            self._on_event("mavsdk_log_repeats", {"counts": repeats})
         self.system = None
         if self._recorder is not None:
             self._recorder.stop()
@@ -360,3 +533,22 @@ class VehicleLink:
             return await self.call(getter(name), f"param {name}", 5.0)
         except Exception:
             return None
+
+    async def get_all_params(self, timeout_s: float = 3.0) -> dict[str, float | int]:
+        """Every parameter of the vehicle (MAVLink PARAM_REQUEST_LIST through MAVSDK), name → value.
+
+        For the per-flight parameter snapshot (``params.json``); bounded by ``timeout_s`` so a slow
+        link does not hold up a flight (MAVSDK's own read goes on in the background and is waited
+        for at ``close()``). Raises ``TimeoutError`` or MAVSDK's ``ParamError``; the caller decides."""
+        all_params = await self.call(self.param.get_all_params(), "all params", timeout_s)
+        out: dict[str, float | int] = {p.name: int(p.value) for p in all_params.int_params}
+        out.update({p.name: float(p.value) for p in all_params.float_params})
+        return out
+
+    async def autopilot_name(self) -> str | None:
+        """The autopilot, "PX4" or "ArduPilot", as its heartbeat says (None when MAVSDK cannot tell)."""
+        try:
+            ap = await self.system.autopilot_type()
+        except Exception:
+            return None
+        return {"PX4": "PX4", "ARDUPILOT": "ArduPilot"}.get(getattr(ap, "name", ""))

@@ -24,6 +24,7 @@ from typing import Any
 from flighttest import guard as gd
 from flighttest.errors import FlighttestError
 from flighttest.flightlog import FlightLog
+from flighttest.inputs import MAX_DURATION_S
 from flighttest.link import VehicleLink
 from flighttest.missions_config import MissionConfig
 from flighttest.preflight import PreflightResult, param_checks, trajectory_checks, trajectory_stats, vehicle_checks
@@ -31,12 +32,17 @@ from flighttest.profiles import VehicleProfile
 from flighttest.streamer import Setpoint, SetpointStreamer
 from flighttest.trajectory import Trajectory
 
-PILOT_MODES = {"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE"}
+PILOT_MODES = gd.PILOT_MODES
 CLIMB_RATE_MPS = 1.0
 START_TOL_M = 0.3
 SETTLE_SPEED_MPS = 0.25
 LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
+# a trajectory longer than this outlasts the battery (flighttest.inputs): a damaged file, not a flight,
+# and resampling it at the setpoint rate could need more memory than there is
+MAX_TRAJECTORY_S = MAX_DURATION_S
 LADDER_TIMEOUT_S = 120.0
+LAND_STALE_S = 1.0  # while PX4 lands by itself, telemetry missing longer than this starts the ladder's Land
+PARAMS_TIMEOUT_S = 3.0  # the preflight parameter snapshot may delay a flight by at most this
 
 
 @dataclass
@@ -62,7 +68,7 @@ class FlightOutcome:
     outcome: str  # completed | aborted | probe_stopped | refused | dry_run
     abort_reason: str | None
     descent_time_s: float | None
-    log_dir: str
+    log_dir: str | None  # None: refused before anything answered, no folder was left
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -92,7 +98,7 @@ class MissionRunner:
         self.ladder = gd.AbortLadder(gd.LadderTiming(
             recover_max_s=self.cfg.abort.recover_max_s, arrested_vd_mps=self.cfg.abort.arrested_vd_mps,
             hold_confirm_s=self.cfg.abort.hold_confirm_s, hold_dwell_s=self.cfg.abort.hold_dwell_s,
-            land=self.fl.land,
+            link_give_up_s=LINK_GIVE_UP_S, land=self.fl.land,
         ))  # fmt: skip
         region = req.profile.guard_region()
         g = self.cfg.guard
@@ -108,6 +114,7 @@ class MissionRunner:
         self.guard.armed = False
         self.guard.fluct_active = False  # judged only while streaming, against this flight's hover
         self.floor_active = False
+        check_duration(req.trajectory)
         self.traj = req.trajectory.resample(self.fl.rate_hz)
         self.origin: tuple[float, float, float] | None = None
         self.end_point: tuple[float, float, float] | None = None
@@ -118,9 +125,12 @@ class MissionRunner:
         self.abort_verdict = ""
         self._ladder_cmds: asyncio.Queue[str] = asyncio.Queue()
         self._recovery_task: asyncio.Task | None = None
+        self._land_task: asyncio.Task | None = None  # the ladder's Land command, sent in the background
+        self._land_stale_since: float | None = None  # a telemetry gap during the nominal landing began then
         self._bg: list[asyncio.Task] = []
         self._signals = 0
         self.first_inside_region_t: float | None = None
+        self.connected = False  # an autopilot answered: from then on the log folder is kept
         self.panel = None  # the live panel while flying from a terminal
 
     # -- helpers -------------------------------------------------------------------------------------
@@ -189,6 +199,11 @@ class MissionRunner:
 
     def _on_mode(self, old: str, new: str) -> None:
         self.event("mode", old=old, new=new)
+        if self.phase == "land" and new in PILOT_MODES and not self.ladder.active:
+            # the pilot takes the landing over: send nothing more (the ladder, once started, sees it itself)
+            self.abort(f"pilot took over ({new}) while landing", gd.Rung.LAND)
+            self.ladder._enter(time.monotonic(), gd.Rung.DONE, f"pilot in control ({new})")
+            return
         if not self.expect_offboard or new == "OFFBOARD" or self.ladder.active:
             return
         if new in PILOT_MODES:
@@ -203,6 +218,9 @@ class MissionRunner:
         self.event("link", connected=connected)
         if not connected and self.guard.armed:
             self.abort("link lost", gd.Rung.HOLD)
+        elif not connected and self.phase == "land" and not self.ladder.active:
+            # PX4 is landing (the guard is off for that): keep asking it to, and watch, in the ladder's Land
+            self.abort("link lost while landing", gd.Rung.LAND)
 
     async def _stale_ticker(self) -> None:
         period = self.limits.telemetry_period_s
@@ -220,6 +238,21 @@ class MissionRunner:
                 if self.log is not None:
                     self.log.guard(d)
                 self.abort(d.reason, verdict=d.verdict)
+            elif d is not None and d.verdict == gd.STALE and self.phase == "land" and not self.ladder.active:
+                # the guard is off while landing (below the floor is the point), staleness is not. PX4
+                # flies its own Land, so a short gap is no reason to abort a finished descent: it is
+                # logged once per gap; a gap longer than LAND_STALE_S hands over to the ladder's Land,
+                # which keeps re-sending Land and gives up after LINK_GIVE_UP_S
+                now = time.monotonic()
+                if self._land_stale_since is None:
+                    self._land_stale_since = now
+                    if self.log is not None:
+                        self.log.guard(d)
+                    self.event("stale_while_landing", reason=d.reason)
+                elif now - self._land_stale_since > LAND_STALE_S:
+                    self.abort(f"{d.reason} while landing", gd.Rung.LAND, verdict=d.verdict)
+            elif d is None:
+                self._land_stale_since = None
             if self.log is not None:
                 self.log.flush_if_due()
 
@@ -227,13 +260,17 @@ class MissionRunner:
     async def run(self) -> FlightOutcome:
         req = self.req
         self.log = FlightLog(req.log_root, self.mission_name)
-        self.log.write_meta({
-            "mission": self.mission_name, "config": self.cfg.to_dict(), "vehicle": req.profile.summary(),
-            "trajectory_path": req.trajectory_path, "trajectory_meta": req.trajectory.meta,
-            "connect": req.connect, "sysid": req.sysid, "dry_run": req.dry_run,
-            "wind_ned_mps": req.wind_ned_mps, "argv": sys.argv,
-        })  # fmt: skip
-        self.log.save_trajectory(req.trajectory)
+        try:
+            self.log.write_meta({
+                "mission": self.mission_name, "config": self.cfg.to_dict(), "vehicle": req.profile.summary(),
+                "trajectory_path": req.trajectory_path, "trajectory_meta": req.trajectory.meta,
+                "connect": req.connect, "sysid": req.sysid, "dry_run": req.dry_run,
+                "wind_ned_mps": req.wind_ned_mps, "argv": sys.argv,
+            })  # fmt: skip
+            self.log.save_trajectory(req.trajectory)
+        except OSError as exc:
+            self.log.discard()
+            raise FlighttestError(f"cannot write the flight log in {self.log.dir} ({exc.strerror or exc})") from None
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
@@ -245,15 +282,23 @@ class MissionRunner:
             outcome = self._outcome("refused", str(exc))
         except FlighttestError as exc:
             outcome = self._outcome("refused", str(exc))
+        except Exception as exc:  # a bug or a library's surprise: logged in full, one line for the user
+            self.event("exception", error=repr(exc), traceback=traceback.format_exc())
+            outcome = self._outcome("aborted", self.ladder.reason or f"internal error: {exc!r}")
         finally:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
                     loop.remove_signal_handler(sig)
-            if outcome is None:  # an unexpected error escaped: still leave a summary
+            if outcome is None:  # cancelled: still leave a summary
                 outcome = self._outcome("aborted", self.ladder.reason or "internal error")
             self.event("end", outcome=outcome.outcome, reason=outcome.abort_reason)
-            self.log.write_summary(outcome.summary())
-            self.log.close()
+            if not self.connected:
+                # nothing answered, nothing flew: no folder (an empty .tlog would only break `analyse logs/`)
+                self.log.discard()
+                outcome.log_dir = None
+            else:
+                self.log.write_summary(outcome.summary())
+                self.log.close()
         return outcome
 
     def _on_signal(self, name: str) -> None:
@@ -296,6 +341,7 @@ class MissionRunner:
         except BaseException:
             await link.close()
             raise
+        self.connected = connect_task.done() and not connect_task.cancelled()
         if self.ladder.active:  # Ctrl-C while connecting
             await link.close()
             return self._outcome("aborted", self.ladder.reason)
@@ -321,9 +367,10 @@ class MissionRunner:
             for t in self._bg:
                 t.cancel()
             await asyncio.gather(*self._bg, return_exceptions=True)
-            if self._recovery_task is not None:
-                self._recovery_task.cancel()
-                await asyncio.gather(self._recovery_task, return_exceptions=True)
+            for task in (self._recovery_task, self._land_task):
+                if task is not None:
+                    task.cancel()
+                    await asyncio.gather(task, return_exceptions=True)
             if self.streamer is not None:
                 self.streamer.stop_watchdog()
             await link.close()
@@ -365,7 +412,8 @@ class MissionRunner:
             result = await self._race(flow)
         except Exception as exc:  # the flow failed: treat like any other abort
             self.event("exception", error=repr(exc), traceback=traceback.format_exc())
-            self.abort(f"error: {exc}", verdict="exception")
+            # a landing that went wrong goes on landing: Recover and Hold would stop it mid-air
+            self.abort(f"error: {exc}", gd.Rung.LAND if self.phase == "land" else gd.Rung.RECOVER, verdict="exception")
             result = None
         if not self.ladder.active and result is not None:
             return result
@@ -385,6 +433,22 @@ class MissionRunner:
 
         for name, kind in ABORT_PARAMS.items():
             params[name] = await link.get_param(name, kind)
+        # the parameter snapshot of this flight (params.json): everything relevant, read once and
+        # bounded (a slow link must not hold the flight up); else the values just read, noted
+        from flighttest.analysis.params import snapshot
+
+        all_params, note = None, None
+        try:
+            all_params = await link.get_all_params(PARAMS_TIMEOUT_S) or None
+            note = None if all_params else "the vehicle sent no parameters; kept the preflight check's"
+        except Exception as exc:
+            note = f"reading all parameters failed ({exc}); kept the preflight check's"
+        snap = snapshot(all_params, params, await link.autopilot_name(), time.time(), note)
+        try:
+            self.log.write_params(snap)
+            self.event("params", source=snap["source"], kept=len(snap["params"]), read=snap["params_read"], note=note)
+        except OSError as exc:
+            self.event("warning", what=f"params.json not written ({exc})")
         accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
         stats = trajectory_stats(self.traj, self.limits.region, accel)
         ab = self.cfg.abort
@@ -518,33 +582,39 @@ class MissionRunner:
         st = link.state
         self.event("ladder_start", reason=self.ladder.reason, rung=self.ladder.rung.name)
         t_start = time.monotonic()
+        logged = 0  # from the trigger on (made in a listener, before this loop ran)
+
+        def log_decisions() -> None:  # every rung change and every decision within a rung, as it happens
+            nonlocal logged
+            for t, rung, why in self.ladder.history[logged:]:
+                self.event("ladder", rung=rung, why=why, decided_t_s=round(t - self.log.t0_mono, 3))
+            logged = len(self.ladder.history)
+
         if not st.armed and not st.in_air:
             self.ladder._enter(time.monotonic(), gd.Rung.DONE, "vehicle on the ground")
         while not self.ladder.done:
             while not self._ladder_cmds.empty():
                 await self._execute(self._ladder_cmds.get_nowait())
+            log_decisions()
             now = time.monotonic()
             fresh = st.t_posvel is not None and now - st.t_posvel <= self.limits.stale_after_s
+            heard = max((t for t in (st.t_posvel, st.t_att, st.t_imu) if t is not None), default=t_start)
             d = self.last_decision
             ob = gd.LadderObservation(
                 t_s=now, vd_mps=st.vd_mps, region_ok=d is None or not (d.margin_mps < 0),
                 telemetry_fresh=fresh, mode=st.flight_mode,
                 landed=not st.armed, link_ok=st.connected,  # done when disarmed, not at touchdown
+                heard_age_s=now - max(heard, t_start),
             )  # fmt: skip
-            before = self.ladder.rung
             cmd = self.ladder.step(ob)
-            if self.ladder.rung != before:
-                self.event("ladder", rung=self.ladder.rung.name, why=self.ladder.history[-1][2])
+            log_decisions()
             if cmd:
                 await self._execute(cmd)
-            last_seen = st.t_posvel or t_start
-            if not st.connected and now - last_seen > LINK_GIVE_UP_S:  # heartbeats gone too
-                self.ladder._enter(now, gd.Rung.DONE, "no telemetry: the vehicle's own failsafe is in charge")
-                self.event("ladder", rung="DONE", why=self.ladder.history[-1][2])
-            elif now - t_start > LADDER_TIMEOUT_S:
+            if not self.ladder.done and now - t_start > LADDER_TIMEOUT_S:
                 self.ladder._enter(now, gd.Rung.DONE, "ladder timed out")
-                self.event("ladder", rung="DONE", why=self.ladder.history[-1][2])
+            log_decisions()
             await asyncio.sleep(0.05)
+        log_decisions()
         self.event("ladder_end", history=[(round(t - self.log.t0_mono, 3), r, w) for t, r, w in self.ladder.history],
                    mode=st.flight_mode, armed=st.armed)  # fmt: skip
 
@@ -570,13 +640,24 @@ class MissionRunner:
                     await link.call(link.action.hold(), "hold", 5.0)
             elif cmd == gd.CMD_LAND:
                 await self._stop_recovery()
-                await link.call(link.action.land(), "land", 5.0)
+                # in the background: with the link gone the call takes its whole timeout, and the
+                # ladder must go on watching (and give up) meanwhile
+                if self._land_task is not None and not self._land_task.done():
+                    self.event("ladder_command_skipped", command=cmd, why="the last Land is still unanswered")
+                else:
+                    self._land_task = asyncio.create_task(self._send_land())
         except Exception as exc:
             self.event("ladder_command_failed", command=cmd, error=str(exc))
             if cmd == gd.CMD_HOLD:
                 nxt = self.ladder.escalate(time.monotonic(), f"hold failed: {exc}")
                 if nxt:
                     self._ladder_cmds.put_nowait(nxt)
+
+    async def _send_land(self) -> None:
+        try:
+            await self.link.call(self.link.action.land(), "land", 5.0)
+        except Exception as exc:  # the ladder re-sends it; the log says why this one failed
+            self.event("ladder_command_failed", command=gd.CMD_LAND, error=str(exc))
 
     async def _stop_recovery(self) -> None:
         if self._recovery_task is not None:
@@ -615,6 +696,13 @@ class MissionRunner:
         await self.streamer.stream(rec_at, "recover", max_ticks=ticks)
         hold = Setpoint(st.n_m, st.e_m, st.d_m, yaw_deg=yaw)
         await self.streamer.stream(lambda k: hold, "recover_hold")
+
+
+def check_duration(traj: Trajectory, what: str = "trajectory") -> None:
+    """A finite, bounded duration before anything resamples or streams the trajectory."""
+    d = traj.duration_s
+    if not (math.isfinite(d) and 0 <= d <= MAX_TRAJECTORY_S):
+        raise FlighttestError(f"{what} lasts {d:g} s: a flight's must be finite and at most {MAX_TRAJECTORY_S:g} s")
 
 
 async def fly(req: FlyRequest) -> FlightOutcome:

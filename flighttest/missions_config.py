@@ -4,15 +4,16 @@
 
     mission = "vertical"          # probe | helix | vertical | file
     [flight]    start_height_m, min_alt_m, geofence_radius_m, settle_s, rate_hz, land, takeoff_timeout_s
-    [plan]      mission-specific planner inputs (free-form numbers/strings, passed to the planner)
+    [plan]      the mission's planner inputs (per mission: see _PLAN)
     [guard]     horizon_s, debounce_samples, clear_violation_mps, stale_periods, observe_region,
                 max_descent_mps, fluct_window_s, max_rate_std_dps, max_accel_std_mps2, fluct_ratio,
                 fluct_min_rate_std_dps, fluct_min_accel_std_mps2
     [abort]     recover_max_s, arrested_vd_mps, hold_confirm_s, hold_dwell_s, recovery_lateral_mps,
                 recovery_climb_mps, recovery_s
 
-Unknown keys, wrong types and out-of-range numbers are one ``FlighttestError`` line naming the file
-and the key.
+Every key has a type and a physical range (``_RANGES``; ``[plan]``: ``_PLAN``, per mission). Unknown
+keys, wrong types and out-of-range numbers are one ``FlighttestError`` line naming the file and the
+key, at load, before anything is planned or flown.
 """
 
 from __future__ import annotations
@@ -23,6 +24,23 @@ from pathlib import Path
 from typing import Any
 
 from flighttest.errors import FlighttestError
+from flighttest.inputs import (
+    ALTITUDE_FLOOR_M,
+    CHIRP_RATE_RPS2,
+    DISTANCE_M,
+    DURATION_S,
+    FRACTION,
+    HEIGHT_M,
+    INTERVALS,
+    MARGIN_MPS,
+    MAX_ACCEL_MPS2,
+    MAX_DURATION_S,
+    SPEED_MPS,
+    START_HEIGHT_M,
+    Range,
+    check_text,
+    shown,
+)
 from flighttest.tomlfile import read_toml
 
 MISSION_KINDS = ("probe", "helix", "vertical", "file")
@@ -98,10 +116,88 @@ def _as_dict(obj) -> dict[str, Any]:
     return {f.name: getattr(obj, f.name) for f in fields(obj)}
 
 
-# numbers that may be zero (everything else numeric must be > 0)
-_NON_NEGATIVE = {"horizon_s", "clear_violation_mps", "settle_s", "min_alt_m", "recovery_lateral_mps",
-                 "recovery_climb_mps", "recovery_s", "hold_dwell_s", "min_battery_percent",
-                 "fluct_min_rate_std_dps", "fluct_min_accel_std_mps2"}  # fmt: skip
+# Every field's type and physical range (flighttest.inputs). Booleans are the fields whose default is
+# a bool; everything else is a number in its range (the optional ones may be absent).
+_S = "s"
+_RANGES: dict[str, Range] = {
+    # [flight]
+    "start_height_m": START_HEIGHT_M,
+    "min_alt_m": ALTITUDE_FLOOR_M,
+    "geofence_radius_m": DISTANCE_M,
+    "settle_s": Range(0.0, 60.0, _S),
+    "rate_hz": Range(0.0, None, "Hz", lo_open=True),  # then [1, 200] below, with its own message
+    "telemetry_hz": Range(1.0, 200.0, "Hz"),
+    "takeoff_timeout_s": Range(0.0, MAX_DURATION_S, _S, lo_open=True),
+    "connect_timeout_s": Range(0.0, MAX_DURATION_S, _S, lo_open=True),
+    "min_battery_percent": Range(0.0, 100.0, "%"),
+    # [guard]
+    "horizon_s": Range(0.0, 5.0, _S),
+    "debounce_samples": Range(1, 100, integer=True),
+    "clear_violation_mps": MARGIN_MPS,
+    "stale_periods": Range(0.0, 100.0, lo_open=True),
+    "max_descent_mps": SPEED_MPS,
+    "fluct_window_s": Range(0.0, 10.0, _S, lo_open=True),
+    "max_rate_std_dps": Range(0.0, 3600.0, "°/s", lo_open=True),
+    "max_accel_std_mps2": Range(0.0, MAX_ACCEL_MPS2, "m/s²", lo_open=True),
+    "fluct_ratio": Range(0.0, 100.0, lo_open=True),
+    "fluct_min_rate_std_dps": Range(0.0, 3600.0, "°/s"),
+    "fluct_min_accel_std_mps2": Range(0.0, MAX_ACCEL_MPS2, "m/s²"),
+    # [abort]
+    "recovery_s": Range(0.0, 10.0, _S),
+    "recovery_lateral_mps": Range(0.0, 5.0, "m/s"),
+    "recovery_climb_mps": Range(0.0, 5.0, "m/s"),
+    "recover_max_s": Range(0.0, 30.0, _S, lo_open=True),
+    "arrested_vd_mps": Range(0.0, 5.0, "m/s", lo_open=True),
+    "hold_confirm_s": Range(0.0, 30.0, _S, lo_open=True),
+    "hold_dwell_s": Range(0.0, 60.0, _S),
+}
+
+# [plan]: what each mission's planner reads (missions/*.py), typed and bounded. A key that is not
+# here would be silently ignored by the planner (a typo flies the default), so it is refused.
+_TEXT = "text"
+_PLAN: dict[str, dict[str, Range | str]] = {
+    "vertical": {
+        "descent_m": HEIGHT_M,
+        "accel_fraction": FRACTION,
+        "extra_margin_mps": MARGIN_MPS,
+    },
+    "probe": {
+        "amplitude_m": HEIGHT_M,
+        "omega0_rps2": CHIRP_RATE_RPS2,
+        "ramp_s": DURATION_S,
+        "duration_s": DURATION_S,
+        "max_descent_ratio": Range(0.0, 10.0, lo_open=True),
+        "max_descent_mps": Range(0.0, 20.0, "m/s", lo_open=True),
+        "accel_fraction": FRACTION,
+    },
+    "helix": {
+        "trajectory": _TEXT,  # a planned file (NAME.csv + NAME.json) beside the config, flown instead
+        "descent_m": HEIGHT_M,
+        "radius_m": DISTANCE_M,
+        "n_intervals": INTERVALS,
+        "n_coarse": Range(5, 1000, integer=True),
+        "guard_margin_mps": MARGIN_MPS,
+        "tilt_margin_deg": Range(0.0, 90.0, "°", hi_open=True),
+        "rate_fraction": FRACTION,
+        "thrust_max_fraction": FRACTION,
+        "thrust_min_fraction": Range(0.0, 1.0, hi_open=True),
+        "descent_max_mps": SPEED_MPS,
+    },
+    "file": {},  # a trajectory file is flown as planned
+}
+
+
+def _number(where: str, key: str, value: Any, rng: Range) -> float | int:
+    """One number of a config: the type first (a string or a bool is not a number), then the range."""
+    kind = "an integer " if rng.integer else ""
+    if isinstance(value, bool) or not isinstance(value, int | float) or (rng.integer and not isinstance(value, int)):
+        kind = "an integer" if rng.integer else "a finite number"
+        raise FlighttestError(f"{where}: '{key}' must be {kind} {rng.bounds()} (got {shown(value)})")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise FlighttestError(f"{where}: '{key}' must be a finite number (got {shown(value)})")
+    if not rng.ok(value):
+        raise FlighttestError(f"{where}: '{key}' must be {kind}{rng.bounds()} (got {shown(value)})")
+    return int(value) if rng.integer else float(value)
 
 
 def _validated(cls, raw: dict[str, Any], where: str):
@@ -109,33 +205,47 @@ def _validated(cls, raw: dict[str, Any], where: str):
     out: dict[str, Any] = {}
     for key, value in raw.items():
         if key not in known:
-            raise FlighttestError(f"{where}: unknown key '{key}' (known: {', '.join(known)})")
-        default = known[key].default
-        if isinstance(default, bool):
+            raise FlighttestError(f"{where}: unknown key {shown(key, 40)} (known: {', '.join(known)})")
+        if isinstance(known[key].default, bool):
             if not isinstance(value, bool):
-                raise FlighttestError(f"{where}: '{key}' must be true or false (got {value!r})")
-        elif isinstance(default, int) and not isinstance(default, bool) and key == "debounce_samples":
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise FlighttestError(f"{where}: '{key}' must be an integer ≥ 1 (got {value!r})")
-        else:  # float or optional float
-            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-                raise FlighttestError(f"{where}: '{key}' must be a finite number (got {value!r})")
-            value = float(value)
-            if value < 0 or (value == 0 and key not in _NON_NEGATIVE):
-                rel = "≥ 0" if key in _NON_NEGATIVE else "> 0"
-                raise FlighttestError(f"{where}: '{key}' must be {rel} (got {value!r})")
-        out[key] = value
+                raise FlighttestError(f"{where}: '{key}' must be true or false (got {shown(value)})")
+            out[key] = value
+        else:
+            out[key] = _number(where, key, value, _RANGES[key])
     return cls(**out)
 
 
+def _validated_plan(mission: str, raw: dict[str, Any], where: str) -> dict[str, Any]:
+    schema = _PLAN[mission]
+    out: dict[str, Any] = {}
+    for key, value in raw.items():
+        if key not in schema:
+            known = ", ".join(schema) or "none: a trajectory file is flown as planned"
+            raise FlighttestError(f"{where}: unknown key {shown(key, 40)} for mission '{mission}' (known: {known})")
+        kind = schema[key]
+        if kind == _TEXT:
+            out[key] = check_text(value, f"{where}: '{key}'", max_chars=1000, single_line=True)
+        else:
+            assert isinstance(kind, Range)
+            out[key] = _number(where, key, value, kind)
+    lo, hi = out.get("thrust_min_fraction"), out.get("thrust_max_fraction")
+    if lo is not None and hi is not None and lo >= hi:
+        raise FlighttestError(f"{where}: 'thrust_min_fraction' ({lo:g}) must be below 'thrust_max_fraction' ({hi:g})")
+    return out
+
+
 def mission_config_from_dict(data: dict[str, Any], path: str = "<config>") -> MissionConfig:
+    if not isinstance(data, dict):
+        raise FlighttestError(f"{path}: a mission config must be a TOML table")
     allowed = {"mission", "flight", "plan", "guard", "abort"}
     for key in data:
         if key not in allowed:
-            raise FlighttestError(f"{path}: unknown section or key '{key}' (known: {', '.join(sorted(allowed))})")
+            raise FlighttestError(
+                f"{path}: unknown section or key {shown(key, 40)} (known: {', '.join(sorted(allowed))})"
+            )
     mission = data.get("mission")
-    if mission not in MISSION_KINDS:
-        raise FlighttestError(f"{path}: 'mission' must be one of {', '.join(MISSION_KINDS)} (got {mission!r})")
+    if not isinstance(mission, str) or mission not in MISSION_KINDS:
+        raise FlighttestError(f"{path}: 'mission' must be one of {', '.join(MISSION_KINDS)} (got {shown(mission)})")
     sections = {}
     for name in ("flight", "plan", "guard", "abort"):
         raw = data.get(name, {})
@@ -145,15 +255,12 @@ def mission_config_from_dict(data: dict[str, Any], path: str = "<config>") -> Mi
     flight = _validated(FlightConfig, sections["flight"], f"{path} [flight]")
     guard = _validated(GuardConfig, sections["guard"], f"{path} [guard]")
     abort = _validated(AbortConfig, sections["abort"], f"{path} [abort]")
+    plan = _validated_plan(mission, sections["plan"], f"{path} [plan]")
     if flight.start_height_m <= flight.min_alt_m:
         raise FlighttestError(f"{path} [flight]: start_height_m must exceed min_alt_m")
     if not 1.0 <= flight.rate_hz <= 200.0:
         raise FlighttestError(f"{path} [flight]: rate_hz must lie in [1, 200] (got {flight.rate_hz:g})")
-    for key, value in sections["plan"].items():
-        ok = isinstance(value, str | bool) or (isinstance(value, int | float) and math.isfinite(value))
-        if not ok and not (isinstance(value, list) and all(isinstance(v, int | float) for v in value)):
-            raise FlighttestError(f"{path} [plan]: '{key}' must be a number, string, bool or list of numbers")
-    return MissionConfig(mission, flight, dict(sections["plan"]), guard, abort, str(path))
+    return MissionConfig(mission, flight, plan, guard, abort, str(path))
 
 
 def load_mission_config(path: Path | str) -> MissionConfig:

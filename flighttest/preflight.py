@@ -11,11 +11,13 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from rich.table import Table
 
+from flighttest.errors import FlighttestError
 from flighttest.frames import GuardRegion
 from flighttest.guard import predicted_blade_velocity_mps
+from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M
 from flighttest.link import TelemetryState
 from flighttest.profiles import VehicleProfile
-from flighttest.trajectory import Trajectory
+from flighttest.trajectory import LIMIT_REL_TOL, Trajectory
 
 PASS, WARN, FAIL = "pass", "warn", "fail"
 
@@ -78,9 +80,18 @@ class TrajectoryStats:
     arrest_floor_m: float  # lowest height (above start - …) reached if the sink is arrested anywhere
     guard_margin_min_mps: float
     guard_margin_t_s: float
+    rise_max_m: float = 0.0  # highest point above the start (-d_m min)
+    problem: str = ""  # why the trajectory itself is not sound (re-checked here), "" if it is
 
 
 def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: float) -> TrajectoryStats:
+    # the loader checked the file; the preflight checks again what will actually be flown (a
+    # trajectory built or edited in memory never went through the loader)
+    try:
+        traj.validate(where="trajectory")
+        problem = ""
+    except FlighttestError as exc:
+        problem = str(exc)
     df = traj.df
     n, e, d = (df[c].to_numpy(float) for c in ("n_m", "e_m", "d_m"))
     vn, ve, vd = (df[c].to_numpy(float) for c in ("vn_mps", "ve_mps", "vd_mps"))
@@ -106,7 +117,13 @@ def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: f
         arrest_floor_m=float((-(d + stop)).min()),
         guard_margin_min_mps=float(margin[i]),
         guard_margin_t_s=float(df["t_s"].iloc[i] - df["t_s"].iloc[0]),
+        rise_max_m=float(max(0.0, -d.min())),
+        problem=problem,
     )
+
+
+def _finite(*values: float) -> bool:
+    return all(math.isfinite(v) for v in values)
 
 
 def trajectory_checks(
@@ -118,31 +135,47 @@ def trajectory_checks(
     recovery_room_m: float = 0.0,
     observe_region: bool = False,
 ) -> list[Check]:
+    """The trajectory against the vehicle and the room of this flight. Every comparison needs finite
+    numbers: a start height of 1e308 m or a NaN anywhere fails (``1e308 − 3 ≥ 1`` would pass)."""
+    speed_ok = _finite(stats.speed_max_mps, stats.descent_max_mps, stats.duration_s) and (
+        stats.speed_max_mps <= profile.max_speed_mps * (1.0 + LIMIT_REL_TOL)
+        and stats.duration_s <= MAX_DURATION_S
+    )
     checks = [
-        Check("trajectory limits", PASS,
-              f"max speed {stats.speed_max_mps:.2f} m/s, max descent {stats.descent_max_mps:.2f} m/s, "
+        Check("trajectory limits", PASS if speed_ok and not stats.problem else FAIL,
+              stats.problem or f"max speed {stats.speed_max_mps:.2f} m/s, max descent {stats.descent_max_mps:.2f} m/s, "
               f"{stats.duration_s:.2f} s",
-              f"within '{profile.name}' tilt/speed/thrust limits"),
+              f"consistent, ≤ {MAX_DURATION_S:g} s, within '{profile.name}' tilt/speed/thrust limits"),
     ]  # fmt: skip
     low = start_height_m - stats.depth_max_m
+    top = start_height_m + stats.rise_max_m
+    height_ok = (
+        _finite(start_height_m, min_alt_m, low, top)
+        and 0.0 < start_height_m <= MAX_HEIGHT_M
+        and low >= min_alt_m - 1e-6
+        and top <= MAX_HEIGHT_M + 1e-6
+    )
     checks.append(Check(
-        "height", PASS if low >= min_alt_m - 1e-6 else FAIL,
-        f"start {start_height_m:.2f} m, lowest point {low:.2f} m",
-        f"lowest point ≥ --min-alt {min_alt_m:g} m",
+        "height", PASS if height_ok else FAIL,
+        f"start {start_height_m:.2f} m, lowest point {low:.2f} m"
+        + (f", highest {top:.2f} m" if stats.rise_max_m > 0.01 or top > MAX_HEIGHT_M else ""),
+        f"lowest point ≥ --min-alt {min_alt_m:g} m, start and highest ≤ {MAX_HEIGHT_M:g} m",
     ))  # fmt: skip
     arrest_low = start_height_m + stats.arrest_floor_m
     checks.append(Check(
-        "height to arrest the sink", PASS if arrest_low >= min_alt_m - 1e-6 else FAIL,
+        "height to arrest the sink", PASS if _finite(arrest_low) and arrest_low >= min_alt_m - 1e-6 else FAIL,
         f"an abort anywhere bottoms out at {arrest_low:.2f} m",
         f"≥ --min-alt {min_alt_m:g} m",
     ))  # fmt: skip
     room = stats.radius_max_m + recovery_room_m
     checks.append(Check(
-        "horizontal room", PASS if room <= geofence_radius_m else FAIL,
+        "horizontal room", PASS if _finite(room, geofence_radius_m) and room <= geofence_radius_m else FAIL,
         f"{stats.radius_max_m:.2f} m from start + {recovery_room_m:.2f} m recovery",
         f"≤ geofence radius {geofence_radius_m:g} m",
     ))  # fmt: skip
-    if stats.guard_margin_min_mps < 0:
+    if not _finite(stats.guard_margin_min_mps):
+        status, value = FAIL, "margin not a number"
+    elif stats.guard_margin_min_mps < 0:
         status, value = (
             WARN,
             f"plan enters the guard region at t={stats.guard_margin_t_s:.2f} s "

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,17 @@ import tomli_w
 from flighttest import aero
 from flighttest.errors import FlighttestError
 from flighttest.frames import GuardRegion
+from flighttest.inputs import (
+    MARGIN_MPS,
+    MAX_SPEED_MPS,
+    MAX_TOML_BYTES,
+    W_ALLOW_POSITIVE_MPS,
+    InputFileError,
+    Range,
+    check_input_file,
+    check_text,
+    shown,
+)
 from flighttest.tomlfile import read_toml
 
 SHIPPED_DIR = Path(__file__).with_name("profiles")
@@ -146,36 +158,43 @@ class VehicleProfile:
 
 # -- loading and validation -------------------------------------------------------------------------
 
-_TOP_REQUIRED = {
-    "name": str,
-    "mass_kg": float,
-    "n_rotors": int,
-    "rotor_diameter_m": float,
-    "arm_length_m": float,
-    "inertia_kgm2": (float, 3),
-    "max_thrust_per_rotor_n": float,
-    "max_rate_dps": (float, 3),
-    "max_tilt_deg": float,
+# Every field has a type and a physical range (flighttest.inputs.Range). The ranges are wide — from
+# a 1 g nano-quadcopter to a 500 kg lifter — but finite, so the derived figures (v_h, w_allow,
+# accelerations) are finite too; a profile that passes them but still yields absurd derived figures
+# is refused by _check_derived.
+_NAME = "name"
+_TEXT = "text"
+_TOP_REQUIRED: dict[str, Any] = {
+    "name": _NAME,
+    "mass_kg": Range(0.001, 500.0, "kg"),
+    "n_rotors": Range(3, 16, integer=True),
+    "rotor_diameter_m": Range(0.01, 3.0, "m"),
+    "arm_length_m": Range(0.01, 5.0, "m"),
+    "inertia_kgm2": (Range(1e-8, 1000.0, "kg·m²"), 3),
+    "max_thrust_per_rotor_n": Range(0.0, 5000.0, "N", lo_open=True),
+    "max_rate_dps": (Range(1.0, 3600.0, "°/s"), 3),
+    "max_tilt_deg": Range(0.0, 90.0, "°", lo_open=True, hi_open=True),
 }
-_TOP_OPTIONAL = {
-    "description": str,
-    "air_density_kgpm3": float,
-    "min_thrust_per_rotor_n": float,
-    "max_speed_mps": float,
-    "max_climb_mps": float,
-    "yaw_moment_per_thrust_m": float,
+_TOP_OPTIONAL: dict[str, Any] = {
+    "description": _TEXT,
+    # sea level 1.225; 0.2 is above 12 km, 1.8 colder and denser than any surface air
+    "air_density_kgpm3": Range(0.2, 1.8, "kg/m³"),
+    "min_thrust_per_rotor_n": Range(0.0, 5000.0, "N"),
+    "max_speed_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
+    "max_climb_mps": Range(0.0, 50.0, "m/s", lo_open=True),
+    "yaw_moment_per_thrust_m": Range(0.0, 1.0, "m", lo_open=True),
 }
-_VRS_FIELDS = {
-    "cone_deg": float,
-    "w_allow_mps": float,
-    "margin_mps": float,
-    "onera_k": float,
-    "eps_vrs": float,
-    "eps_tws": float,
-    "source": str,
+_VRS_FIELDS: dict[str, Any] = {
+    "cone_deg": Range(0.0, 90.0, "°", lo_open=True, hi_open=True),
+    "w_allow_mps": W_ALLOW_POSITIVE_MPS,
+    "margin_mps": MARGIN_MPS,
+    "onera_k": Range(0.0, 100.0, lo_open=True),
+    "eps_vrs": Range(0.0, 5.0, lo_open=True),
+    "eps_tws": Range(0.0, 5.0, lo_open=True),
+    "source": _TEXT,
 }
-# fields that may be zero; every other number must be > 0
-_NON_NEGATIVE = {"min_thrust_per_rotor_n", "margin_mps"}
+MAX_V_H_MPS = 50.0  # hover induced velocity: ~4 m/s on a Mambo, ~15 m/s on heavy lifters
+MAX_THRUST_TO_WEIGHT = 30.0  # racing quadcopters reach ~15
 
 
 def _bad(path: Path | str, key: str, why: str) -> FlighttestError:
@@ -186,33 +205,61 @@ def _check_value(path, key: str, value: Any, kind) -> Any:
     if isinstance(kind, tuple):
         elem, n = kind
         if not isinstance(value, list) or len(value) != n:
-            raise _bad(path, key, f"must be a list of {n} numbers (got {value!r})")
+            raise _bad(path, key, f"must be a list of {n} numbers (got {shown(value)})")
         return tuple(_check_value(path, f"{key}[{i}]", v, elem) for i, v in enumerate(value))
-    if kind is str:
-        if not isinstance(value, str):
-            raise _bad(path, key, f"must be a string (got {value!r})")
+    if kind is _NAME:
+        # the name becomes part of file names (vehicles/NAME.toml, trajectories/helix-NAME-…)
+        if not isinstance(value, str) or not value.strip() or len(value) > 64 or _NAME_BAD.search(value):
+            raise _bad(path, key, f"must be a name of 1-64 characters without / \\ or control characters "
+                                  f"(got {shown(value)})")  # fmt: skip
         return value
-    if kind is int:
-        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-            raise _bad(path, key, f"must be a positive integer (got {value!r})")
-        return value
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise _bad(path, key, f"must be a finite number (got {value!r})")
-    base = key.split("[")[0].split(".")[-1]
-    if base in _NON_NEGATIVE:
-        if value < 0:
-            raise _bad(path, key, f"must be ≥ 0 (got {value!r})")
-    elif value <= 0:
-        raise _bad(path, key, f"must be > 0 (got {value!r})")
-    return float(value)
+    if kind is _TEXT:
+        try:
+            return check_text(value, "", max_chars=2000)
+        except FlighttestError as exc:
+            raise _bad(path, key, str(exc).strip()) from None
+    if not kind.ok(value):
+        raise _bad(path, key, f"must be {kind.describe()} (got {shown(value)})")
+    return int(value) if kind.integer else float(value)
+
+
+_NAME_BAD = re.compile(r"[/\\\x00-\x1f\x7f]")
+
+
+def _check_derived(prof: VehicleProfile, path: Path | str) -> None:
+    """The figures everything else divides by must come out finite and physical."""
+    try:
+        figures = {
+            "v_h_mps": prof.v_h_mps,
+            "w_allow_mps": prof.w_allow_mps,
+            "thrust_to_weight": prof.thrust_to_weight,
+            "max_accel_up_mps2": prof.max_accel_up_mps2,
+            "max_accel_down_mps2": prof.max_accel_down_mps2,
+        }
+        figures["w_allow_n"] = figures["w_allow_mps"] / figures["v_h_mps"]
+    except (ArithmeticError, ValueError) as exc:
+        raise FlighttestError(f"{path}: the profile's derived figures cannot be computed ({exc})") from None
+    for name, value in figures.items():
+        if not (math.isfinite(value) and value > 0):
+            raise FlighttestError(f"{path}: derived {name} = {value!r} is not a finite positive number")
+    if figures["v_h_mps"] > MAX_V_H_MPS:
+        raise FlighttestError(
+            f"{path}: hover induced velocity v_h = {figures['v_h_mps']:.3g} m/s is not physical (at most "
+            f"{MAX_V_H_MPS:g}; are the rotors too small for the mass, or the air too thin?)"
+        )
+    if figures["thrust_to_weight"] > MAX_THRUST_TO_WEIGHT:
+        raise _bad(path, "max_thrust_per_rotor_n",
+                   f"gives thrust/weight {figures['thrust_to_weight']:.3g} (at most {MAX_THRUST_TO_WEIGHT:g})")
 
 
 def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> VehicleProfile:
     """Validate a parsed TOML document into a profile; any problem is one FlighttestError line."""
+    if not isinstance(data, dict):
+        raise FlighttestError(f"{path}: a vehicle profile must be a TOML table")
     known = set(_TOP_REQUIRED) | set(_TOP_OPTIONAL) | {"vrs"}
     for key in data:
         if key not in known:
-            raise _bad(path, key, "is not a known profile field")
+            raise _bad(path, shown(key, 40).strip("'"), "is not a known profile field")
     kwargs: dict[str, Any] = {}
     for key, kind in _TOP_REQUIRED.items():
         if key not in data:
@@ -227,21 +274,18 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
     vrs_kwargs: dict[str, Any] = {}
     for key, value in vrs_raw.items():
         if key not in _VRS_FIELDS:
-            raise _bad(path, f"vrs.{key}", "is not a known field")
+            raise _bad(path, f"vrs.{shown(key, 40).strip(chr(39))}", "is not a known field")
         vrs_kwargs[key] = _check_value(path, f"vrs.{key}", value, _VRS_FIELDS[key])
     vrs = VrsBoundary(**vrs_kwargs)
-    if not 0 < vrs.cone_deg < 90:
-        raise _bad(path, "vrs.cone_deg", f"must lie in (0, 90) degrees (got {vrs.cone_deg})")
     if vrs.eps_tws > vrs.eps_vrs:
         raise _bad(path, "vrs.eps_tws", "must not exceed vrs.eps_vrs (the TWS lies inside the VRS)")
-    if not 0 < kwargs["max_tilt_deg"] < 90:
-        raise _bad(path, "max_tilt_deg", f"must lie in (0, 90) degrees (got {kwargs['max_tilt_deg']})")
     prof = VehicleProfile(**kwargs, vrs=vrs, path=str(path))
     if prof.thrust_to_weight <= 1.0:
         twr = prof.thrust_to_weight
         raise _bad(path, "max_thrust_per_rotor_n", f"cannot lift the vehicle (thrust/weight {twr:.2f})")
     if prof.min_thrust_per_rotor_n >= prof.hover_thrust_per_rotor_n:
         raise _bad(path, "min_thrust_per_rotor_n", "must be below the hover thrust per rotor")
+    _check_derived(prof, path)
     return prof
 
 
@@ -255,27 +299,50 @@ def _candidates() -> dict[str, Path]:
     """Profile name → file; user folders shadow shipped profiles."""
     found: dict[str, Path] = {}
     for d in [SHIPPED_DIR, *reversed(user_dirs())]:
-        if d.is_dir():
-            for f in sorted(d.glob("*.toml")):
-                found[f.stem] = f
+        try:
+            files = sorted(f for f in d.glob("*.toml") if not f.is_dir()) if d.is_dir() else []
+        except OSError:  # an unreadable folder in $FLIGHTTEST_VEHICLES holds no profiles we can use
+            files = []
+        for f in files:
+            found[f.stem] = f
     return found
 
 
+def scan_profiles() -> tuple[list[VehicleProfile], list[str]]:
+    """Every profile that loads, and one line per file that does not (``vehicle list`` shows both:
+    one damaged file in a user folder must not hide the others)."""
+    good: list[VehicleProfile] = []
+    bad: list[str] = []
+    for _, p in sorted(_candidates().items()):
+        try:
+            good.append(load_profile_file(p))
+        except FlighttestError as exc:
+            bad.append(str(exc))
+    return good, bad
+
+
 def list_profiles() -> list[VehicleProfile]:
-    return [load_profile_file(p) for _, p in sorted(_candidates().items())]
+    """The profiles that load (see :func:`scan_profiles` for the ones that do not)."""
+    return scan_profiles()[0]
 
 
 def load_profile(name_or_path: str | Path) -> VehicleProfile:
     """A profile by name (user folders first, then shipped) or by path to a ``.toml`` file."""
     s = str(name_or_path)
-    if s.endswith(".toml") or os.sep in s:
-        if not Path(s).is_file():
-            raise FlighttestError(f"vehicle profile file not found: {s}")
+    if not s.strip():
+        raise FlighttestError("vehicle: the name is empty (a profile name or a .toml path)")
+    if s.endswith(".toml") or os.sep in s or "/" in s:
+        try:
+            check_input_file(s, "vehicle profile file", MAX_TOML_BYTES)
+        except InputFileError as exc:
+            if exc.reason == "not found":
+                raise FlighttestError(f"vehicle profile file not found: {s}") from None
+            raise
         return load_profile_file(s)
     cands = _candidates()
     if s not in cands:
         known = ", ".join(sorted(cands)) or "none"
-        raise FlighttestError(f"unknown vehicle '{s}' (known: {known})")
+        raise FlighttestError(f"unknown vehicle {shown(s)} (known: {known})")
     return load_profile_file(cands[s])
 
 

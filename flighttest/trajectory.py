@@ -27,6 +27,20 @@ from flighttest import __version__
 from flighttest.aero import G_MPS2
 from flighttest.errors import FlighttestError
 from flighttest.frames import quat_to_rotmat
+from flighttest.inputs import (
+    MAX_ACCEL_MPS2,
+    MAX_CSV_BYTES,
+    MAX_DURATION_S,
+    MAX_HEIGHT_M,
+    MAX_HORIZONTAL_M,
+    MAX_JSON_BYTES,
+    MAX_SPEED_MPS,
+    InputFileError,
+    atomic_write,
+    check_input_file,
+    read_text_file,
+    shown,
+)
 
 if TYPE_CHECKING:
     from flighttest.profiles import VehicleProfile
@@ -49,6 +63,22 @@ START_TOL_M = 1e-3
 LIMIT_REL_TOL = 0.01
 TILT_TOL_DEG = 0.5
 QUAT_NORM_TOL = 1e-3
+
+# Bounds on any trajectory, vehicle or not (flighttest.inputs: why these numbers).
+MAX_ROWS = 600_001  # 600 s at 1 kHz
+MAX_ABS_DEG = 3600.0  # yaw/roll/pitch: a few turns of unwrapped angle at most
+MAX_THRUST_N = 1e5
+MAX_META_DEPTH = 32  # nesting of the JSON sidecar (a planner writes 3 levels)
+# Kinematic consistency (positions vs integrated velocities, velocities vs integrated accelerations,
+# trapezoid rule per step and over the whole file). Planners are consistent to well under a
+# millimetre; the tolerance takes a few cm of rounding in hand-made files plus a share of the step,
+# plus what a step in acceleration inside a sample interval can do to the trapezoid rule
+# (|Δa|·h²/8 in position, |Δa|·h/2 in velocity: bang-bang plans switch between samples).
+POS_TOL_M = 0.02
+VEL_TOL_MPS = 0.05
+STEP_REL_TOL = 0.02
+DRIFT_TOL_M = 0.10
+DRIFT_TOL_MPS = 0.10
 
 
 def _paths(path: Path | str) -> tuple[Path, Path]:
@@ -115,7 +145,7 @@ class Trajectory:
             raise FlighttestError(f"{where}: missing column(s) {', '.join(missing)}")
         extra = [c for c in df.columns if c not in REQUIRED_COLUMNS and c not in OPTIONAL_COLUMNS]
         if extra:
-            raise FlighttestError(f"{where}: unknown column(s) {', '.join(map(str, extra))}")
+            raise FlighttestError(f"{where}: unknown column(s) {shown(', '.join(map(str, extra)), 80)}")
         quat_present = [c for c in QUAT_COLUMNS if c in df]
         if quat_present and len(quat_present) != 4:
             raise FlighttestError(f"{where}: attitude needs all of qw, qx, qy, qz")
@@ -132,6 +162,12 @@ class Trajectory:
         t = df["t_s"].to_numpy()
         if abs(t[0]) > 1e-9:
             raise FlighttestError(f"{where}: time must start at 0 s (starts at {t[0]:g} s)")
+        late = np.abs(t) > MAX_DURATION_S  # t_s = 1e308 stops here, before any arithmetic on it
+        if late.any():
+            i = int(np.argmax(late))
+            raise FlighttestError(
+                f"{where}: t_s = {t[i]:.6g} s at row {i + 1} (a trajectory lasts at most {MAX_DURATION_S:g} s)"
+            )
         steps = np.diff(t)
         if (steps <= 0).any():
             i = int(np.argmax(steps <= 0))
@@ -139,21 +175,104 @@ class Trajectory:
         start = df[["n_m", "e_m", "d_m"]].iloc[0].to_numpy()
         if np.abs(start).max() > START_TOL_M:
             raise FlighttestError(f"{where}: positions must be relative to the start (first row {start.tolist()})")
+        self._check_bounds(where)  # before any arithmetic on the values: nothing overflows after it
         if quat_present:
             q = self.attitude_quat()
             norm = np.linalg.norm(q, axis=1)
             if np.abs(norm - 1.0).max() > QUAT_NORM_TOL:
                 i = int(np.argmax(np.abs(norm - 1.0)))
                 raise FlighttestError(f"{where}: quaternion at row {i + 1} is not unit length (|q|={norm[i]:.4f})")
-        meta_missing = [k for k in REQUIRED_META if k not in self.meta]
-        if meta_missing:
-            raise FlighttestError(f"{where}: metadata lacks {', '.join(meta_missing)}")
-        if self.meta["format"] != FORMAT:
-            raise FlighttestError(f"{where}: unknown format {self.meta['format']!r} (expected {FORMAT!r})")
-        if self.meta["kind"] not in KINDS:
-            raise FlighttestError(f"{where}: unknown kind {self.meta['kind']!r} (one of {', '.join(KINDS)})")
+        self._check_consistency(where)
+        self._check_meta(where)
         if profile is not None:
             self._check_limits(profile, where)
+
+    def _check_bounds(self, where: str) -> None:
+        """Sizes no flight test has: more rows than 600 s at 1 kHz, longer than 600 s, heights
+        beyond 120 m, speeds beyond 100 m/s, accelerations beyond 10 g (``t_s = 1e308`` is refused
+        here, not inside the flight)."""
+        df = self.df
+        if len(df) > MAX_ROWS:
+            raise FlighttestError(f"{where}: {len(df):,} rows (at most {MAX_ROWS:,}: 600 s at 1 kHz)")
+        if self.duration_s > MAX_DURATION_S:
+            raise FlighttestError(f"{where}: lasts {self.duration_s:.6g} s (at most {MAX_DURATION_S:g} s)")
+        bounds = (
+            (("n_m", "e_m"), MAX_HORIZONTAL_M, "m"), (("d_m",), MAX_HEIGHT_M, "m"),
+            (("vn_mps", "ve_mps", "vd_mps"), MAX_SPEED_MPS, "m/s"),
+            (("an_mps2", "ae_mps2", "ad_mps2"), MAX_ACCEL_MPS2, "m/s²"),
+            (("yaw_deg", "roll_deg", "pitch_deg"), MAX_ABS_DEG, "°"), (("thrust_n",), MAX_THRUST_N, "N"),
+            (QUAT_COLUMNS, 2.0, ""),
+        )  # fmt: skip
+        for cols, bound, unit in bounds:
+            for c in cols:
+                if c not in df:
+                    continue
+                v = np.abs(df[c].to_numpy(float))
+                if (v > bound).any():
+                    i = int(np.argmax(v > bound))
+                    raise FlighttestError(
+                        f"{where}: {c} = {df[c].iloc[i]:.6g} at row {i + 1} is beyond ±{bound:g} {unit}"
+                    )
+
+    def _check_consistency(self, where: str) -> None:
+        """Positions must be what the velocities integrate to, velocities what the accelerations
+        integrate to (a 3 m jump in 10 ms at zero velocity is a broken file, not a manoeuvre)."""
+        df = self.df
+        t = df["t_s"].to_numpy(float)
+        h = np.diff(t)
+        p = df[["n_m", "e_m", "d_m"]].to_numpy(float)
+        v = df[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(float)
+        a = df[["an_mps2", "ae_mps2", "ad_mps2"]].to_numpy(float)
+        da = np.linalg.norm(np.diff(a, axis=0), axis=1)
+        for what, x, dx, tol, drift_tol, jump in (
+            ("position", p, v, POS_TOL_M, DRIFT_TOL_M, da * h * h / 8.0),
+            ("velocity", v, a, VEL_TOL_MPS, DRIFT_TOL_MPS, da * h / 2.0),
+        ):
+            step_int = 0.5 * (dx[1:] + dx[:-1]) * h[:, None]  # trapezoid rule per step
+            err = np.linalg.norm(np.diff(x, axis=0) - step_int, axis=1)
+            travel = np.linalg.norm(step_int, axis=1)
+            allowed = tol + STEP_REL_TOL * travel + jump
+            if (err > allowed).any():
+                i = int(np.argmax(err - allowed))
+                rate = "velocities" if what == "position" else "accelerations"
+                raise FlighttestError(
+                    f"{where}: {what} changes by {np.linalg.norm(x[i + 1] - x[i]):.3g} between rows {i + 1} and "
+                    f"{i + 2} (t={t[i]:.3f}–{t[i + 1]:.3f} s) but the {rate} integrate to "
+                    f"{travel[i]:.3g} (off by {err[i]:.3g}): the file is not physically consistent"
+                )
+            drift = np.linalg.norm((x[1:] - x[0]) - np.cumsum(step_int, axis=0), axis=1)
+            allowed = drift_tol + STEP_REL_TOL * np.cumsum(travel) + np.cumsum(jump)
+            if (drift > allowed).any():
+                i = int(np.argmax(drift - allowed))
+                rate = "velocities" if what == "position" else "accelerations"
+                raise FlighttestError(
+                    f"{where}: by t={t[i + 1]:.3f} s the {what} has drifted {drift[i]:.3g} from what the {rate} "
+                    "integrate to: the file is not physically consistent"
+                )
+
+    def _check_meta(self, where: str) -> None:
+        meta = self.meta
+        meta_missing = [k for k in REQUIRED_META if k not in meta]
+        if meta_missing:
+            raise FlighttestError(f"{where}: metadata lacks {', '.join(meta_missing)}")
+        if meta["format"] != FORMAT:
+            raise FlighttestError(f"{where}: unknown format {shown(meta['format'])} (expected {FORMAT!r})")
+        if meta["kind"] not in KINDS:
+            raise FlighttestError(f"{where}: unknown kind {shown(meta['kind'])} (one of {', '.join(KINDS)})")
+        for key in ("vehicle", "status"):
+            if not isinstance(meta[key], str):
+                raise FlighttestError(f"{where}: metadata '{key}' must be a string (got {shown(meta[key])})")
+        if not isinstance(meta["problem"], dict):
+            raise FlighttestError(f"{where}: metadata 'problem' must be an object (got {shown(meta['problem'])})")
+        t_f = meta["t_f_s"]
+        if isinstance(t_f, bool) or not isinstance(t_f, int | float) or not math.isfinite(t_f):
+            raise FlighttestError(f"{where}: metadata 't_f_s' must be a finite number (got {shown(t_f)})")
+        if abs(t_f - self.duration_s) > 0.05 + 0.01 * self.duration_s:
+            raise FlighttestError(
+                f"{where}: metadata t_f_s = {t_f:.6g} s but the samples last {self.duration_s:.6g} s"
+            )
+        if _depth(meta) > MAX_META_DEPTH:
+            raise FlighttestError(f"{where}: metadata nested deeper than {MAX_META_DEPTH} levels")
 
     def _check_limits(self, profile: VehicleProfile, where: str) -> None:
         df = self.df
@@ -176,9 +295,16 @@ class Trajectory:
                     f"{where}: collective thrust {thrust[i]:.3g} N at t={df['t_s'].iloc[i]:.3f} s is below the "
                     f"vehicle minimum ({min_thrust_n:.3g} N; fixed-pitch rotors cannot reverse)"
                 )
-        else:
-            _limit(where, "required thrust", np.linalg.norm(spec, axis=1) * profile.mass_kg, max_thrust_n * tol,
-                   "N", df)  # fmt: skip
+        # what the accelerations ask of the rotors, whatever a thrust column says
+        required = np.linalg.norm(spec, axis=1) * profile.mass_kg
+        _limit(where, "required thrust", required, max_thrust_n * tol, "N", df)
+        low = required < min_thrust_n - LIMIT_REL_TOL * max_thrust_n
+        if low.any():
+            i = int(np.argmax(low))
+            raise FlighttestError(
+                f"{where}: the acceleration at t={df['t_s'].iloc[i]:.3f} s needs {required[i]:.3g} N of thrust, below "
+                f"the vehicle minimum ({min_thrust_n:.3g} N): it falls faster than the rotors allow"
+            )
         if self.has_attitude():
             r = quat_to_rotmat(self.attitude_quat())
             tilt = np.degrees(np.arccos(np.clip(r[:, 2, 2], -1.0, 1.0)))
@@ -192,9 +318,11 @@ class Trajectory:
     def save(self, path: Path | str) -> tuple[Path, Path]:
         """Write ``NAME.csv`` and ``NAME.json``; returns both paths."""
         csv_path, json_path = _paths(path)
-        csv_path.parent.mkdir(parents=True, exist_ok=True)
-        self.df.to_csv(csv_path, index=False, float_format="%.9g")
-        json_path.write_text(json.dumps(_json_safe(self.meta), indent=2) + "\n", encoding="utf-8")
+        # each file appears whole (a reader never sees half a CSV); missing folders are created
+        with atomic_write(csv_path) as tmp:
+            self.df.to_csv(tmp, index=False, float_format="%.9g")
+        with atomic_write(json_path) as tmp:
+            tmp.write_text(json.dumps(_json_safe(self.meta), indent=2) + "\n", encoding="utf-8")
         return csv_path, json_path
 
     @classmethod
@@ -204,27 +332,42 @@ class Trajectory:
         With a vehicle profile it also refuses trajectories that break that vehicle's limits.
         Every problem is one ``FlighttestError`` line naming the file.
         """
+        if not str(path).strip():
+            raise FlighttestError("trajectory file: the path is empty")
         csv_path, json_path = _paths(path)
-        for p in (csv_path, json_path):
-            if not p.is_file():
-                raise FlighttestError(f"trajectory file not found: {p}")
+        for p, limit in ((csv_path, MAX_CSV_BYTES), (json_path, MAX_JSON_BYTES)):
+            try:
+                check_input_file(p, "trajectory file", limit)
+            except InputFileError as exc:
+                if exc.reason == "not found":
+                    raise FlighttestError(f"trajectory file not found: {p}") from None
+                raise
         try:
-            meta = json.loads(json_path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise FlighttestError(f"{json_path}: malformed trajectory metadata ({exc})") from None
+            meta = json.loads(read_text_file(json_path, "trajectory metadata", MAX_JSON_BYTES))
+        except InputFileError as exc:
+            raise FlighttestError(f"{json_path}: malformed trajectory metadata ({exc.reason})") from None
+        except (json.JSONDecodeError, RecursionError) as exc:
+            why = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+            raise FlighttestError(f"{json_path}: malformed trajectory metadata ({why})") from None
         if not isinstance(meta, dict):
             raise FlighttestError(f"{json_path}: metadata must be a JSON object")
         try:
-            df = pd.read_csv(csv_path)
-        except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-            raise FlighttestError(f"{csv_path}: malformed trajectory CSV ({str(exc).strip()})") from None
+            # one row more than allowed is enough to refuse a file without reading all of it
+            df = pd.read_csv(csv_path, nrows=MAX_ROWS + 1, encoding="utf-8")
+        except (OSError, UnicodeDecodeError, ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+            why = " ".join(str(exc).split())[:120]
+            raise FlighttestError(f"{csv_path}: malformed trajectory CSV ({why})") from None
         for c in df.columns:
             if not pd.api.types.is_numeric_dtype(df[c]):
                 converted = pd.to_numeric(df[c], errors="coerce")
                 if converted.isna().any():
                     row = int(np.argmax(converted.isna().to_numpy()))
-                    raise FlighttestError(f"{csv_path}: non-numeric value {df[c].iloc[row]!r} in column '{c}'")
+                    raise FlighttestError(
+                        f"{csv_path}: non-numeric value {shown(df[c].iloc[row])} in column {shown(c, 40)}"
+                    )
                 df[c] = converted
+            elif pd.api.types.is_bool_dtype(df[c]):
+                raise FlighttestError(f"{csv_path}: non-numeric values (true/false) in column {shown(c, 40)}")
         traj = cls(df=df.astype(float), meta=meta)
         traj.validate(profile, where=str(csv_path))
         return traj
@@ -296,6 +439,21 @@ def _limit(where: str, what: str, values: np.ndarray, bound: float, unit: str, d
             f"{where}: {what} {values[i]:.3g} {unit} at t={df['t_s'].iloc[i]:.3f} s breaks the vehicle limit "
             f"({bound:.3g} {unit})"
         )
+
+
+def _depth(obj: Any) -> int:
+    """Nesting depth of a JSON value, without recursion (a hostile sidecar may be deep)."""
+    deepest, stack = 0, [(obj, 1)]
+    while stack:
+        o, d = stack.pop()
+        deepest = max(deepest, d)
+        if d > MAX_META_DEPTH:
+            break
+        if isinstance(o, dict):
+            stack.extend((v, d + 1) for v in o.values())
+        elif isinstance(o, list):
+            stack.extend((v, d + 1) for v in o)
+    return deepest
 
 
 def _json_safe(obj: Any) -> Any:

@@ -221,9 +221,10 @@ def test_ladder_no_land_ends_in_hold_and_unconfirmed_hold_escalates():
     assert lad.step(ob(0.5, mode="HOLD")) is None and lad.done
     lad2 = g.AbortLadder(g.LadderTiming(hold_confirm_s=2.0))
     assert lad2.trigger(0.0, "left offboard", first=g.Rung.HOLD) == g.CMD_HOLD
-    assert lad2.step(ob(2.1, mode="POSCTL")) == g.CMD_LAND
-    assert lad2.step(ob(2.2, mode="POSCTL")) is None
-    assert lad2.step(ob(5.3, mode="POSCTL")) == g.CMD_LAND  # re-sent
+    # (a mode that is neither Hold nor a pilot's: a pilot's mode ends the ladder, test_ladder_land_watch)
+    assert lad2.step(ob(2.1, mode="OFFBOARD")) == g.CMD_LAND
+    assert lad2.step(ob(2.2, mode="OFFBOARD")) is None
+    assert lad2.step(ob(5.3, mode="OFFBOARD")) == g.CMD_LAND  # re-sent
     assert lad2.reason == "left offboard"
 
 

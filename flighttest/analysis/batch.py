@@ -46,13 +46,13 @@ def _one(args: tuple[str, str | None, SegmentConfig | None]) -> tuple[str, dict 
         return path, None, str(exc)
     except Exception as exc:  # a worker must never take the campaign down
         return path, None, f"{path}: analysis failed ({type(exc).__name__}: {exc})"
-    return path, {"summary": a.summary(), "descents": a.descents, "events": a.log.events}, None
+    return path, {"summary": a.summary(), "descents": a.descents, "events": a.log.events, "meta": a.log.meta}, None
 
 
 def analyse_many(
     paths: list[Path], vehicle: str | None, seg: SegmentConfig | None = None, workers: int | None = None
 ) -> list[tuple[str, dict | None, str | None]]:
-    """(path, {"summary", "descents", "events"} or None, error or None) per log, in input order."""
+    """(path, {"summary", "descents", "events", "meta"} or None, error or None) per log, in input order."""
     jobs = [(str(p), vehicle, seg) for p in paths]
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     if workers == 1:

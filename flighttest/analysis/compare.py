@@ -45,17 +45,53 @@ def flown_descent(events: list[dict]) -> pd.Series | None:
     return pd.Series({"start_s": float(start), "end_s": float(start) + float(dur), "duration_s": float(dur)})
 
 
-def compare_row(log: str, descents: pd.DataFrame, events: list[dict] | None = None) -> dict:
+def flight_outcome(meta: dict | None) -> str | None:
+    """How a flighttest flight ended (``summary.json`` ``outcome``: completed, aborted, probe_stopped,
+    ...); None for logs of other tools and for flights whose process never wrote its summary."""
+    summary = meta.get("summary") if isinstance(meta, dict) else None
+    outcome = summary.get("outcome") if isinstance(summary, dict) else None
+    return outcome if isinstance(outcome, str) and outcome else None
+
+
+def compare_row(
+    log: str,
+    descents: pd.DataFrame,
+    events: list[dict] | None = None,
+    meta: dict | None = None,
+    params: dict | None = None,
+) -> dict:
     """One row of ``flighttest compare``: the log, how many descents, its main descent's figures and,
-    for flighttest's own logs, ``descent_time_s`` (rest to rest, see ``flown_descent``)."""
+    for flighttest's own logs, ``descent_time_s`` (rest to rest, see ``flown_descent``).
+
+    Given the log's ``meta`` the row gets ``outcome`` (:func:`flight_outcome`); given its parameters,
+    ``params``: the ones that shape these tests (``flighttest.analysis.params.relevant``). Without
+    them the row keeps its older shape (the campaign's ``compare.csv``)."""
     row: dict = {"log": log, "mission": None, "descents": len(descents)}
+    if meta is not None:
+        row["outcome"] = flight_outcome(meta)
     p = primary_descent(descents)
     if p is not None:
         row.update({k: p[k] for k in COMPARE_KEYS})
     if events is not None:
         flown = flown_descent(events)
         row["descent_time_s"] = None if flown is None else flown["duration_s"]
+    if params is not None:
+        from flighttest.analysis.params import relevant
+
+        row["params"] = relevant(params)
     return row
+
+
+def add_param_differences(rows: list[dict]) -> list[dict]:
+    """``param_differences`` of each row: {name: this flight's value (None: its log lacks it)} for the
+    relevant parameters not the same in every flight compared (``flighttest.analysis.params.differences``;
+    a log without parameters takes no part). Rows without ``params`` count as logs without parameters."""
+    from flighttest.analysis.params import differences
+
+    diff = differences([row.get("params") or {} for row in rows])
+    for i, row in enumerate(rows):
+        row["param_differences"] = {name: values[i] for name, values in diff.items()}
+    return rows
 
 
 def add_speedup(rows: list[dict], key: str = "duration_s") -> list[dict]:

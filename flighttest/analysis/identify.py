@@ -24,7 +24,9 @@ The fit is a gamma GLM with identity link (a windowed mean of squares is gamma-l
 grows with its mean), by iteratively reweighted least squares for each ``w0`` on a grid of
 ``step_mps``, keeping the ``w0`` of least deviance. Only the probe's own samples are used: from a
 flighttest log the ``settle`` and ``stream`` phases up to the first abort (the recovery manoeuvre
-shakes the vehicle by design), otherwise every airborne sample.
+shakes the vehicle by design) and up to the last setpoint (the landing is not the probe's),
+otherwise every airborne sample. :func:`sweep_fluctuation` gives the same fluctuation per sample
+of the sweep alone, on the RMS × hover scale of ``threshold_ratio``, for the report's probe plot.
 
 The stated **uncertainty** is the spread of a residual block bootstrap (the fitted curve times
 the data's own relative scatter, resampled in blocks of ``block_s`` because neighbouring samples
@@ -171,23 +173,43 @@ def _onset_from(y, zs, grid, iterations) -> tuple[float, float, float, int]:
     return float(grid[k]), float(b0[k]), float(b1[k]), k
 
 
-def _probe_mask(log: FlightLog, t: np.ndarray) -> np.ndarray | None:
-    """Samples in the probe's settle/stream phases before the first abort (flighttest logs only)."""
+def _probe_mask(log: FlightLog, t: np.ndarray, phases: tuple[str, ...] = PROBE_PHASES) -> np.ndarray | None:
+    """Samples in the given mission phases (the probe's settle/stream by default) before the first abort
+    and no later than the last setpoint streamed (flighttest logs only). The mission stops writing
+    setpoints when it hands over to the autopilot's landing, so without that end the last phase
+    written (the settle after the sweep) would run on through the landing."""
     sp = log.setpoints
     if sp is None or len(sp) == 0 or "phase" not in sp:
         return None
     sp = sp.sort_values("t_s")
-    idx = np.searchsorted(sp["t_s"].to_numpy(float), t, side="right") - 1
+    t_sp = sp["t_s"].to_numpy(float)
+    idx = np.searchsorted(t_sp, t, side="right") - 1
     phase = np.where(idx >= 0, sp["phase"].to_numpy(object)[np.clip(idx, 0, None)], "")
-    mask = np.isin(phase, PROBE_PHASES)
+    period = float(np.median(np.diff(t_sp))) if len(t_sp) > 1 else 0.0
+    mask = np.isin(phase, phases) & (t <= t_sp[-1] + 2.0 * period)
     aborts = [float(e["t_s"]) for e in (log.events or []) if e.get("event") == "abort" and "t_s" in e]
     if aborts:
         mask &= t < min(aborts)
     return mask if mask.any() else None
 
 
-def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig | None = None) -> Onset:
-    cfg = cfg or IdentifyConfig()
+@dataclass(frozen=True)
+class _ProbeSamples:
+    """What the fit works on, per state sample: the windowed fluctuation power of the selected samples
+    (NaN elsewhere) and the blade-frame descent speed."""
+
+    t_s: np.ndarray
+    w_mps: np.ndarray
+    power: np.ndarray  # windowed over the selected samples only
+    use: np.ndarray  # finite, no glitch, airborne, and (flighttest logs) the probe's phases before an abort
+    hover: np.ndarray  # the hover samples the power is normalised by (fluctuation.hover_mask)
+    phased: bool  # True when the log's own mission phases chose the samples
+    dt_s: float
+    n_win: int
+    signals: tuple[str, ...]
+
+
+def _probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) -> _ProbeSamples:
     state = log.state
     if "glitch" not in state:
         from flighttest.analysis.segment import find_descents
@@ -211,6 +233,13 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         use &= probe
     # windows average over selected samples only: the recovery's shaking must not leak back in
     y_all = _centred_mean(np.where(use, power, np.nan), n_win)
+    return _ProbeSamples(t, w_all, y_all, use, hover, probe is not None, dt, n_win, tuple(signals))
+
+
+def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig | None = None) -> Onset:
+    cfg = cfg or IdentifyConfig()
+    ps = _probe_samples(log, profile, cfg)
+    t, w_all, y_all, use, dt, n_win = ps.t_s, ps.w_mps, ps.power, ps.use, ps.dt_s, ps.n_win
     descending = use & (w_all > cfg.min_speed_mps)
     if descending.sum() < 3 * cfg.min_samples_above:
         raise FlighttestError(f"{log.name}: too few descending samples to identify an onset ({int(descending.sum())})")
@@ -267,16 +296,103 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         rise_ratio=rise,
         bootstrap_sd_mps=boot_sd,
         resolution_mps=resolution,
-        signals=tuple(signals),
+        signals=ps.signals,
         bins=_bins(w_all[use], y, b0, b1, w0),
     )
 
 
 def _bins(w: np.ndarray, y: np.ndarray, b0: float, b1: float, w0: float, width: float = 0.05) -> pd.DataFrame:
+    """Mean power per speed bin with the fitted hinge at the bin centres; the fit's coefficients ride
+    along in ``attrs`` (``b0``, ``b1``, ``w0_mps``) so a plot can draw the hinge at any speed."""
     b = np.floor(w / width).astype(np.int64)
     g = pd.DataFrame({"b": b, "p": y}).groupby("b")["p"].agg(["mean", "size"])
     centers = (g.index.to_numpy() + 0.5) * width
-    return pd.DataFrame({
+    out = pd.DataFrame({
         "w_mps": centers, "power_mean": g["mean"].to_numpy(), "samples": g["size"].to_numpy(),
         "power_fit": b0 + b1 * np.maximum(centers - w0, 0.0) ** 2,
     })  # fmt: skip
+    out.attrs.update(b0=float(b0), b1=float(b1), w0_mps=float(w0))
+    return out
+
+
+LANDING_MODES = ("LAND", "RTL")  # substrings of the mode names PX4 and ArduPilot land in
+
+
+def _is_landing(state: pd.DataFrame, start_s: float, end_s: float, end_alt_m: float | None = None) -> bool:
+    """A descent that ends the flight: the vehicle never climbs a metre above where it ended (an
+    estimator drifting on the ground stays well inside that), or it descends in a landing mode."""
+    t = state["t_s"].to_numpy(float)
+    h = -state["d_m"].to_numpy(float)
+    if end_alt_m is None or not math.isfinite(end_alt_m):
+        end_alt_m = float(np.interp(end_s, t, h))
+    after = t > end_s
+    stays_down = not after.any() or float(np.nanmax(h[after])) < end_alt_m + 1.0
+    inside = (t >= start_s) & (t <= end_s)
+    modes = state["mode"].astype(str).to_numpy()[inside] if "mode" in state else np.array([], str)
+    return stays_down or any(m in mode.upper() for mode in set(modes) for m in LANDING_MODES)
+
+
+def sweep_fluctuation(
+    log: FlightLog,
+    profile: VehicleProfile,
+    cfg: IdentifyConfig | None = None,
+    descents: pd.DataFrame | None = None,
+) -> pd.DataFrame:
+    """The probe's sweep, sample by sample, with the fluctuation :func:`identify_onset` fits, for a
+    plot a person reads the onset off.
+
+    Columns: ``t_s``, ``w_mps`` (blade-frame, air-relative descent speed), ``w_n`` (``w / v_h``) and
+    ``fluct_ratio``: the RMS fluctuation × hover, ``sqrt(P / P_hover)`` with ``P`` the windowed power
+    identify fits and ``P_hover`` its mean over the hover samples — the same RMS scale as identify's
+    ``threshold_ratio`` and ``rise_ratio``, so hover reads 1 and the detector's threshold 2.
+
+    Only the sweep: in a flighttest log the ``stream`` phase up to the first abort (not the hover
+    before it, the recovery or the landing); in any other log (no phases) the samples from the start of
+    the first descent to the end of the last one that is not the landing (``descents``: the analysis'
+    table, found here when not given). In both, only descending samples (``w > min_speed_mps``).
+    ``attrs``: ``selection`` (one line saying which rule chose the samples), ``phased``,
+    ``hover_power``, ``hover_samples``, ``hover_from``, ``signals``."""
+    cfg = cfg or IdentifyConfig()
+    ps = _probe_samples(log, profile, cfg)
+    t = ps.t_s
+    ref, hover_from = ps.use & ps.hover, "hover samples"
+    if ref.sum() < ps.n_win:
+        ref, hover_from = ps.use & (np.abs(ps.w_mps) < cfg.min_speed_mps), "slowest samples (no hover found)"
+    if ref.sum() < ps.n_win:
+        ref, hover_from = ps.use, "whole flight (no hover found)"
+    hover_power = float(np.nanmean(ps.power[ref])) if ref.any() else math.nan
+    stream = _probe_mask(log, t, ("stream",)) if ps.phased else None
+    if stream is not None:
+        sweep = stream
+        aborted = any(e.get("event") == "abort" for e in log.events or [])
+        selection = "sweep: the stream phase" + (" up to the abort" if aborted else "") + ", descending samples only"
+    elif ps.phased:
+        sweep = np.zeros(len(t), bool)
+        selection = "no stream phase before the first abort: the sweep was not flown"
+    else:
+        if descents is None:
+            from flighttest.analysis.segment import find_descents
+
+            descents = find_descents(log.state)[0]
+        kept = [
+            r
+            for r in descents.itertuples()
+            if not _is_landing(log.state, r.start_s, r.end_s, getattr(r, "end_alt_m", None))
+        ]
+        if kept:
+            sweep = (t >= min(r.start_s for r in kept)) & (t <= max(r.end_s for r in kept))
+            selection = (
+                f"no flight phases in this log: sweep taken from the first descent to the last before landing "
+                f"({kept[0].start_s:.1f}–{kept[-1].end_s:.1f} s, {len(kept)} descents), descending samples only"
+            )
+        else:
+            sweep = np.zeros(len(t), bool)
+            selection = "no flight phases in this log and no descent but the landing: no sweep"
+    sel = ps.use & sweep & (ps.w_mps > cfg.min_speed_mps) & np.isfinite(ps.power)
+    ratio = np.sqrt(ps.power[sel] / hover_power) if hover_power > 0 else np.full(int(sel.sum()), np.nan)
+    out = pd.DataFrame({
+        "t_s": t[sel], "w_mps": ps.w_mps[sel], "w_n": ps.w_mps[sel] / profile.v_h_mps, "fluct_ratio": ratio,
+    })  # fmt: skip
+    out.attrs.update(selection=selection, phased=ps.phased, hover_power=hover_power,
+                     hover_samples=int(ref.sum()), hover_from=hover_from, signals=list(ps.signals))  # fmt: skip
+    return out

@@ -1,4 +1,13 @@
-"""One log in, the per-descent table out: load → segment → exposure → fluctuation → context."""
+"""One log in, the per-descent table out: load → heights → segment → exposure → fluctuation → context.
+
+The height comes first: :func:`flighttest.analysis.heights.arbitrate` checks every height source the
+log carries against the ground and each other, and where the state's own estimator cannot be trusted
+(or has spans that disagree with the others) :func:`flighttest.analysis.heights.apply` puts the
+trusted height into ``state.d_m`` (the original kept as ``d_est_m``/``vd_est_mps``) before the
+descents are found, so descents, rates and exposure come from a height that agrees with the ground.
+The glitch table joins the segmentation's altitude ``"jump"`` spans and the arbitration's
+``"disagreement"`` spans (columns ``segment.GLITCH_COLUMNS``).
+"""
 
 from __future__ import annotations
 
@@ -11,9 +20,11 @@ import pandas as pd
 
 from flighttest.analysis.exposure import EXPOSURE_COLUMNS, descent_exposure, velocity_track
 from flighttest.analysis.fluctuation import FluctuationConfig, fluctuation
+from flighttest.analysis.heights import HeightArbitration, HeightConfig, apply, arbitrate
 from flighttest.analysis.loaders import load_log
+from flighttest.analysis.params import relevant
 from flighttest.analysis.schema import FlightLog
-from flighttest.analysis.segment import SegmentConfig, find_descents
+from flighttest.analysis.segment import GLITCH_COLUMNS, SegmentConfig, find_descents
 from flighttest.errors import FlighttestError
 from flighttest.profiles import VehicleProfile, load_profile
 
@@ -28,14 +39,21 @@ class Analysis:
     baselines: dict[str, float]
     profile: VehicleProfile | None
     notes: list[str] = field(default_factory=list)
+    heights: HeightArbitration | None = None  # which height the descents were timed on, and why
 
     def summary(self) -> dict:
         """What ``--json`` prints per log."""
+        h = self.heights
         return {
             "log": str(self.log.path),
             "source": self.log.source,
             "vehicle": self.profile.name if self.profile else None,
             "duration_s": float(self.log.state["t_s"].iloc[-1]),
+            "height_source": h.source if h else None,
+            "height_sources": h.records() if h else [],
+            "attitude_source": self.log.attitude_source,
+            "params": relevant(self.log.params),  # the ones that shape these tests (flighttest.analysis.params)
+            "params_source": self.log.params_source,
             "descents": self.descents.drop(columns=["log", "source"], errors="ignore").to_dict("records"),
             "glitches": self.glitches.to_dict("records"),
             "missing": self.log.missing,
@@ -103,9 +121,13 @@ def analyse(
     vehicle: str | None = None,
     seg: SegmentConfig | None = None,
     fl_cfg: FluctuationConfig | None = None,
+    h_cfg: HeightConfig | None = None,
 ) -> Analysis:
     profile, notes = resolve_profile(log, vehicle)
-    descents, glitches = find_descents(log.state, seg)
+    heights = arbitrate(log.state, log.heights, h_cfg)
+    apply(log.state, heights, h_cfg)
+    descents, jumps = find_descents(log.state, seg, bridged=heights.bridged, source=heights.source)
+    glitches = _merge_glitches(jumps, heights.glitches)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows of absent streams
         fl, baselines = fluctuation(log.state, fl_cfg)
@@ -128,9 +150,19 @@ def analyse(
     descents = _context(log, descents)
     descents.insert(0, "source", log.source)
     descents.insert(0, "log", str(log.path))
-    if len(glitches):
-        notes.append(f"{len(glitches)} estimator glitch(es) flagged (altitude jumps), not counted as descents")
-    return Analysis(log, descents, glitches, track, fl, baselines, profile, notes + log.notes)
+    notes.extend(heights.notes)
+    if len(jumps):
+        notes.append(f"{len(jumps)} estimator glitch(es) flagged (altitude jumps), not counted as descents")
+    return Analysis(log, descents, glitches, track, fl, baselines, profile, notes + log.notes, heights)
+
+
+def _merge_glitches(jumps: pd.DataFrame, disagreements: pd.DataFrame) -> pd.DataFrame:
+    """One glitch table, in time order: altitude jumps and spans where the height sources disagree."""
+    parts = [g for g in (jumps, disagreements) if len(g)]
+    if not parts:
+        return pd.DataFrame(columns=GLITCH_COLUMNS)
+    merged = pd.concat(parts, ignore_index=True) if len(parts) > 1 else parts[0]
+    return merged[GLITCH_COLUMNS].sort_values("start_s", kind="stable").reset_index(drop=True)
 
 
 def analyse_path(path: Path | str, vehicle: str | None = None, seg: SegmentConfig | None = None) -> Analysis:

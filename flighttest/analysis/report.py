@@ -115,23 +115,164 @@ def plot_velocity_space(a: Analysis, out: Path) -> Path:
     return out
 
 
-def plot_fluctuation(a: Analysis, out: Path, onset=None) -> Path:
-    fig, ax = plt.subplots(figsize=(8, 5), dpi=100)
-    w = a.track["w_mps"].to_numpy() / a.profile.v_h_mps
-    idx = a.fluct["fluct_index"].to_numpy()
-    sel = np.isfinite(idx) & (w > 0)
-    ax.plot(w[sel], idx[sel], ".", ms=2, alpha=0.5, label="fluctuation index (1 = hover)")
-    ax.axhline(1.0, color="0.5", lw=0.8)
-    ax.axvline(a.profile.w_allow_mps / a.profile.v_h_mps, color="m", ls="--", lw=1, label="profile w_allow")
+FLUCT_BIN_MPS = 0.05  # speed bins of the probe plot
+FLUCT_MIN_BIN_SAMPLES = 5  # bins with fewer samples are drawn hollow: their median is little more than a guess
+BIN_COLUMNS = ["w_lo_mps", "w_hi_mps", "w_mps", "w_n", "samples", "median", "q25", "q75"]
+
+
+def probe_fluctuation_bins(sweep: pd.DataFrame, v_h_mps: float, width_mps: float = FLUCT_BIN_MPS) -> pd.DataFrame:
+    """The probe plot's table: the sweep's samples (:func:`flighttest.analysis.identify.sweep_fluctuation`)
+    binned by descent speed ``w`` in bins ``[w_lo_mps, w_hi_mps)`` of ``width_mps``, with the median and
+    interquartile range of the fluctuation × hover and the number of samples. Medians, not means: a
+    bin the sweep crossed quickly holds a few samples, and one burst would pull its mean off. Only bins
+    with samples appear; ``attrs`` are the sweep's (selection, hover level)."""
+    if len(sweep) == 0:
+        out = pd.DataFrame(columns=BIN_COLUMNS)
+    else:
+        k = np.floor(sweep["w_mps"].to_numpy(float) / width_mps).astype(np.int64)
+        g = pd.DataFrame({"k": k, "r": sweep["fluct_ratio"].to_numpy(float)}).groupby("k")["r"]
+        idx = g.size().index.to_numpy()
+        out = pd.DataFrame({
+            "w_lo_mps": idx * width_mps, "w_hi_mps": (idx + 1) * width_mps, "w_mps": (idx + 0.5) * width_mps,
+            "w_n": (idx + 0.5) * width_mps / v_h_mps, "samples": g.size().to_numpy(),
+            "median": g.median().to_numpy(), "q25": g.quantile(0.25).to_numpy(), "q75": g.quantile(0.75).to_numpy(),
+        })  # fmt: skip
+    out.attrs.update(sweep.attrs, width_mps=width_mps)
+    return out
+
+
+def _guard_fluct_ratio(a: Analysis) -> float | None:
+    """The live guard's fluctuation ratio from the mission config the log carries, if any."""
+    cfg = a.log.meta.get("config")
+    guard = cfg.get("guard") if isinstance(cfg, dict) else None
+    r = guard.get("fluct_ratio") if isinstance(guard, dict) else None
+    return float(r) if isinstance(r, int | float) and math.isfinite(r) and r > 0 else None
+
+
+def _no_data(ax, text: str) -> None:
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, fontsize=10, wrap=True)
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def draw_fluctuation(fig, a: Analysis, onset=None) -> pd.DataFrame:
+    """Draw the probe plot into ``fig`` (two panels: fluctuation × hover over descent speed, samples per
+    bin) and return the binned table drawn (:func:`probe_fluctuation_bins`). The medians and their
+    interquartile band are what to read; the raw samples sit faintly behind. Marked: hover (1×), the
+    detector's threshold, the live guard's ratio when the log's mission config has one, the profile's
+    ``w_allow``, and the identified onset with its band — or, with no onset, how fast the sweep went
+    without one."""
+    import textwrap
+
+    from matplotlib.ticker import NullFormatter
+
+    from flighttest.analysis.identify import IdentifyConfig, sweep_fluctuation
+
+    v_h = a.profile.v_h_mps
+    traj = a.log.meta.get("trajectory_meta")
+    kind = f"{a.log.mission_name or ''} {traj.get('kind', '') if isinstance(traj, dict) else ''}"
+    what = ", probe sweep" if "probe" in kind.lower() else ""
+    fig.suptitle(f"{a.log.name}: fluctuation over descent rate{what}", fontsize=11, y=0.99)
+    try:
+        sweep = sweep_fluctuation(a.log, a.profile, descents=a.descents)
+    except FlighttestError as exc:
+        _no_data(fig.add_subplot(), textwrap.fill(f"no fluctuation to plot: {exc}", 90))
+        return probe_fluctuation_bins(pd.DataFrame(columns=["w_mps", "fluct_ratio"]), v_h)
+    bins = probe_fluctuation_bins(sweep, v_h)
+    if bins.empty:
+        why = textwrap.fill(sweep.attrs["selection"], 90)
+        _no_data(fig.add_subplot(), f"no descending samples in the sweep:\n{why}")
+        return bins
+    # room at the top for the title, the note on which samples these are (up to two lines) and the w/v_h axis
+    gs = fig.add_gridspec(2, 1, height_ratios=[4, 1], hspace=0.08, left=0.11, right=0.97, top=0.835, bottom=0.09)
+    ax = fig.add_subplot(gs[0])
+    axn = fig.add_subplot(gs[1], sharex=ax)
+    fig.text(0.5, 0.952, textwrap.fill(sweep.attrs["selection"], 130), ha="center", va="top", fontsize=8.5,
+             color="0.3")  # fmt: skip
+
+    threshold = onset.threshold_ratio if onset is not None else IdentifyConfig().threshold_ratio
+    guard = _guard_fluct_ratio(a)
+    w_top = float(sweep["w_mps"].max())
+    ax.plot(sweep["w_mps"], sweep["fluct_ratio"], ".", ms=2, color="0.55", alpha=0.25, rasterized=True,
+            label=f"sweep samples ({len(sweep)}, descending)", zorder=1)  # fmt: skip
+    # a full grid of bins, so the band and the median line break where the sweep left a bin empty
+    full = pd.DataFrame({"w_lo_mps": np.arange(bins["w_lo_mps"].min(), bins["w_hi_mps"].max() - 1e-9, FLUCT_BIN_MPS)})
+    full["key"] = np.round(full["w_lo_mps"] / FLUCT_BIN_MPS).astype(np.int64)
+    grid = full.merge(bins.assign(key=np.round(bins["w_lo_mps"] / FLUCT_BIN_MPS).astype(np.int64)), "left", "key")
+    centre = grid["w_lo_mps_x"] + 0.5 * FLUCT_BIN_MPS
+    ax.fill_between(centre, grid["q25"], grid["q75"], color="tab:blue", alpha=0.22, lw=0, zorder=2,
+                    label="interquartile range per bin")  # fmt: skip
+    ax.plot(centre, grid["median"], "-", color="tab:blue", lw=1.8, zorder=3)
+    solid = bins["samples"] >= FLUCT_MIN_BIN_SAMPLES
+    ax.plot(bins["w_mps"][solid], bins["median"][solid], "o", color="tab:blue", ms=4.5, zorder=4,
+            label=f"median per {FLUCT_BIN_MPS:g} m/s bin")  # fmt: skip
+    if (~solid).any():
+        ax.plot(bins["w_mps"][~solid], bins["median"][~solid], "o", mfc="white", mec="tab:blue", ms=4.5, zorder=4,
+                label=f"median of < {FLUCT_MIN_BIN_SAMPLES} samples")  # fmt: skip
+
+    ax.axhline(1.0, color="0.2", lw=1.0, zorder=2, label="hover level (1×)")
+    ax.axhline(threshold, color="tab:orange", ls="--", lw=1.3, zorder=2,
+               label=f"detector threshold {threshold:g}× hover (identify, RMS)")  # fmt: skip
+    if guard is not None:
+        ax.axhline(guard, color="tab:brown", ls=":", lw=1.3, zorder=2,
+                   label=f"live guard stops at {guard:g}× its hover (its own rate-std measure)")  # fmt: skip
+    w_allow = a.profile.w_allow_mps
+    ax.axvline(w_allow, color="m", ls="--", lw=1.1, zorder=2, label=f"profile w_allow {w_allow:.3f} m/s")
+    x_hi = max(w_top, w_allow)
     if onset is not None:
-        ax.axvline(onset.w_onset_n, color="r", lw=1.5, label=f"identified onset {onset.w_onset_mps:.2f} m/s")
-        ax.axvspan(onset.w_onset_n - onset.uncertainty_n, onset.w_onset_n + onset.uncertainty_n, color="r", alpha=0.15)
-    ax.set_xlabel("w / v_h (descent through the disk, air-relative)")
-    ax.set_ylabel("fluctuation / hover")
+        lo, hi = onset.w_onset_mps - onset.uncertainty_mps, onset.w_onset_mps + onset.uncertainty_mps
+        ax.axvspan(lo, hi, color="tab:red", alpha=0.18, lw=0, zorder=1)
+        ax.axvline(onset.w_onset_mps, color="tab:red", lw=1.8, zorder=5,
+                   label=f"identified onset {onset.w_onset_mps:.3f} ± {onset.uncertainty_mps:.3f} m/s")  # fmt: skip
+        b = onset.bins.attrs
+        hover_power = sweep.attrs["hover_power"]
+        if {"b0", "b1", "w0_mps"} <= b.keys() and hover_power > 0:
+            wf = np.linspace(0.0, w_top, 300)
+            fit = np.sqrt((b["b0"] + b["b1"] * np.maximum(wf - b["w0_mps"], 0.0) ** 2) / hover_power)
+            ax.plot(wf, fit, "-", color="tab:red", lw=1.0, alpha=0.8, zorder=4, label="identify's hinge fit")
+        text = (f"onset {onset.w_onset_mps:.3f} ± {onset.uncertainty_mps:.3f} m/s\n"
+                f"= {onset.w_onset_n:.4f} ± {onset.uncertainty_n:.4f} v_h\n"
+                f"(rise {onset.rise_ratio:.1f}× hover at {onset.max_speed_mps:.2f} m/s)")  # fmt: skip
+        ax.annotate(text, xy=(hi, 0.04), xycoords=("data", "axes fraction"), xytext=(8, 0),
+                    textcoords="offset points", fontsize=9, color="tab:red", va="bottom",
+                    bbox={"boxstyle": "round", "fc": "white", "ec": "tab:red", "alpha": 0.9})  # fmt: skip
+        x_hi = max(x_hi, hi)
+    else:
+        peak = float(bins.loc[solid, "median"].max()) if solid.any() else float(bins["median"].max())
+        why = (f"the binned fluctuation stays below {threshold:g}× hover (peak {peak:.1f}×)" if peak < threshold
+               else f"the binned fluctuation reaches {peak:.1f}× hover: run flighttest identify")  # fmt: skip
+        ax.text(0.02, 0.96, f"no onset identified up to {w_top:.2f} m/s ({w_top / v_h:.3f} v_h):\n{why}",
+                transform=ax.transAxes, va="top", fontsize=10, fontweight="bold", color="0.15",
+                bbox={"boxstyle": "round", "fc": "lightyellow", "ec": "0.5", "alpha": 0.95}, zorder=6)  # fmt: skip
+
     ax.set_yscale("log")
-    ax.set_title(f"{a.log.name}: fluctuation over descent speed")
-    ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
+    marks = [1.0, threshold] + ([guard] if guard else [])
+    y_lo = min(0.5, float(np.nanmin(bins["q25"])) * 0.8)
+    y_hi = max(max(marks) * 1.6, float(np.nanmax(bins["q75"])) * 1.3)
+    ax.set_ylim(y_lo, y_hi)
+    ticks = [t for t in (0.2, 0.3, 0.5, 1, 2, 3, 5, 10, 20, 30, 50, 100, 200, 500) if y_lo <= t <= y_hi]
+    ax.set_yticks(ticks, [f"{t:g}×" for t in ticks])
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.set_ylabel("RMS fluctuation × hover\n(body-rate shaking, log scale)")
+    ax.grid(True, which="major", color="0.9", lw=0.6)
+    ax.set_xlim(0.0, x_hi * 1.05 + FLUCT_BIN_MPS)
+    top = ax.secondary_xaxis("top", functions=(lambda w: w / v_h, lambda n: n * v_h))
+    top.set_xlabel(f"w / v_h   (v_h = {v_h:.2f} m/s, {a.profile.name})", fontsize=9)
+    ax.tick_params(labelbottom=False)
+    ax.legend(loc="upper left", bbox_to_anchor=(0.0, 0.84) if onset is None else (0.0, 1.0), fontsize=7.5,
+              framealpha=0.92, markerscale=2.0)  # fmt: skip
+
+    axn.bar(bins["w_mps"], bins["samples"], width=0.85 * FLUCT_BIN_MPS, color="tab:blue", alpha=0.5)
+    axn.set_ylabel("samples\nper bin", fontsize=8)
+    axn.set_xlabel("w: descent rate through the rotor disk, air-relative, m/s")
+    axn.grid(True, axis="y", color="0.9", lw=0.6)
+    return bins
+
+
+def plot_fluctuation(a: Analysis, out: Path, onset=None) -> Path:
+    """The probe plot (:func:`draw_fluctuation`) as a PNG."""
+    fig = plt.figure(figsize=(9, 6.5), dpi=100)
+    draw_fluctuation(fig, a, onset)
     fig.savefig(out)
     plt.close(fig)
     return out
@@ -151,6 +292,55 @@ def markdown_table(df: pd.DataFrame, columns: dict[str, str]) -> str:
     for row in df[cols].itertuples(index=False):
         lines.append("| " + " | ".join(_fmt(v) for v in row) + " |")
     return "\n".join(lines)
+
+
+def params_markdown(params: dict, pairs_per_row: int = 3) -> str:
+    """The relevant parameters of one flight as a compact table: name/value pairs side by side, so
+    ArduPilot's hundred ATC_* gains take a third of the lines."""
+    from flighttest.analysis.params import format_value
+
+    items = [(f"`{k}`", format_value(v)) for k, v in params.items()]
+    n = max(1, min(pairs_per_row, len(items)))
+    lines = ["| " + " | ".join(["parameter", "value"] * n) + " |", "|" + "---|---:|" * n]
+    for i in range(0, len(items), n):
+        chunk = items[i : i + n] + [("", "")] * (n - len(items[i : i + n]))
+        lines.append("| " + " | ".join(c for pair in chunk for c in pair) + " |")
+    return "\n".join(lines)
+
+
+def params_section(a: Analysis) -> list[str]:
+    """Markdown lines: the parameters of ``a``'s flight that shape these tests, or why there are none."""
+    from flighttest.analysis.params import relevant
+
+    rel = relevant(a.log.params)
+    src = f", from {a.log.params_source}" if a.log.params_source else ""
+    if not rel:
+        why = (
+            "None in the log."
+            if not a.log.params
+            else f"None of the log's {len(a.log.params)} parameters is one that shapes these tests "
+            "(flighttest.analysis.params.RELEVANT)."
+        )
+        return [f"### Parameters{src}", "", why, ""]
+    return [f"### Parameters ({len(rel)}{src})", "", params_markdown(rel), ""]
+
+
+def param_differences_section(analyses: list[Analysis], names: list[str]) -> list[str]:
+    """Markdown lines: the relevant parameters not the same in every flight of the report."""
+    from flighttest.analysis.params import differences, format_value, relevant
+
+    snaps = [relevant(a.log.params) for a in analyses]
+    md = ["## Parameters that differ between these flights", ""]
+    with_params = sum(bool(s) for s in snaps)
+    if with_params < 2:
+        return [*md, f"Only {with_params} of {len(snaps)} flights carry parameters: nothing to compare.", ""]
+    diff = differences(snaps)
+    if not diff:
+        return [*md, f"None: the {with_params} flights with parameters were set up alike.", ""]
+    md.append("| parameter | " + " | ".join(names) + " |")
+    md.append("|---|" + "---:|" * len(names))
+    md += [f"| `{k}` | " + " | ".join(format_value(v) for v in vals) + " |" for k, vals in diff.items()]
+    return [*md, "", "– : the flight's log does not have the parameter (or no parameters at all).", ""]
 
 
 def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = None) -> Path:
@@ -186,6 +376,7 @@ def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = 
         md += ["", f"### Descents ({len(a.descents)})", ""]
         md.append(markdown_table(a.descents, TABLE_COLUMNS) if len(a.descents) else "No descent found.")
         md.append("")
+        md += params_section(a)
         images = [
             ("Altitude and descent rate", plot_altitude(a, out_dir / f"{slug}_altitude.png")),
             ("Path", plot_path(a, out_dir / f"{slug}_path.png")),
@@ -207,6 +398,8 @@ def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = 
             md += ["Velocity-space chart and fluctuation plot need a vehicle profile (--vehicle).", ""]
         for title, path in images:
             md += [f"### {title}", "", f"![{title}]({path.name})", ""]
+    if len(analyses) > 1:
+        md += param_differences_section(analyses, [a.log.name for a in analyses])
     out = out_dir / "report.md"
     out.write_text("\n".join(md) + "\n", encoding="utf-8")
     return out

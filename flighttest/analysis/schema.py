@@ -23,8 +23,17 @@ State columns (``STATE_COLUMNS``), all SI, NED/FRD as in NOTES §1:
 ``mode``           flight mode name as pymavlink/PX4/ArduPilot name it (string)
 ``armed``          armed flag (float 1/0, NaN unknown)
 ``wn_mps we_mps wd_mps``  wind NED (velocity of the air), m/s; NaN where the log has no estimate
+``boot_s``         the autopilot's own clock (s since its boot) at the sample; NaN when unknown. It is
+                   the clock PX4's ``.ulg``, ArduPilot's ``.bin`` and the MAVLink ``time_boot_ms``
+                   fields share, so logs of one flight written by different programs line up on it
 ``glitch``         estimator glitch flag set by :mod:`flighttest.analysis.segment` (bool)
 =================  ===========================================================================
+
+Besides the state table a log carries every **height source** it has (:class:`HeightSource`: the
+estimator's local or home-relative height, the barometer, GPS, a rangefinder), each at its own
+rate on the state clock, for :mod:`flighttest.analysis.heights` to check against each other and
+against the ground; the **attitude source** the quaternion columns came from; and the
+**parameters** the autopilot logged (or flighttest read at preflight).
 
 Every source's conventions are converted in its loader and documented there (ArduPilot's cm,
 centidegrees and up-positive altitudes; PX4 topic names; streams at different rates). A stream
@@ -61,6 +70,7 @@ STATE_COLUMNS = [
     "mode",
     "armed",
     *WIND,
+    "boot_s",
 ]
 MAX_MOTORS = 8
 G_MPS2 = 9.80665
@@ -75,6 +85,69 @@ CONSEQUENCE = {
     "mode": "flight mode and armed state unknown",
     "wind": "wind unknown: exposure computed with zero wind",
 }
+
+
+HEIGHT_KINDS = ("estimator", "baro", "gps", "rangefinder")
+
+
+@dataclass(frozen=True)
+class HeightSource:
+    """One height stream of a log, as the log has it.
+
+    ``alt_m`` is up-positive metres above the source's own datum (home, the EKF origin, mean sea
+    level, the pressure at boot, the ground below a rangefinder); ``home_relative`` says whether the
+    source claims that datum is the take-off point, so that on the ground it should read ≈ 0.
+    ``t_s`` is on the log's state clock (the same origin as ``state.t_s``)."""
+
+    name: str  # the log's own name for it, e.g. "LOCAL_POSITION_NED.z", "BARO.Alt", "vehicle_air_data"
+    kind: str  # one of HEIGHT_KINDS
+    t_s: np.ndarray
+    alt_m: np.ndarray
+    home_relative: bool = False
+
+    def __post_init__(self) -> None:
+        if self.kind not in HEIGHT_KINDS:
+            raise ValueError(f"height source kind must be one of {HEIGHT_KINDS} (got {self.kind!r})")
+
+
+ISA_SEA_LEVEL_PA = 101_325.0
+
+
+def pressure_altitude_m(pressure_pa: np.ndarray) -> np.ndarray:
+    """Standard-atmosphere (ISA) altitude of a static pressure, m above the 1013.25 hPa level.
+
+    Against the sea-level pressure rather than the first sample's: with the first sample as the
+    base the same formula scales every height change by 1/(1 − h₀/44330.77), 1 % at a 500 m field,
+    5 % at 2000 m; against 1013.25 hPa the differences are exact in the ISA (and it is the
+    ``baro_alt_meter`` PX4 logs, with its default QNH)."""
+    p = np.asarray(pressure_pa, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return 44330.77 * (1.0 - (p / ISA_SEA_LEVEL_PA) ** 0.190263)
+
+
+def height_source(
+    name: str, kind: str, t_s: np.ndarray, alt_m: np.ndarray, origin_s: float, home_relative: bool = False
+) -> HeightSource | None:
+    """A :class:`HeightSource` from a stream on the source's clock (``origin_s`` = the state's t_s = 0),
+    finite samples only, time-sorted; None when fewer than two samples are left."""
+    t = np.asarray(t_s, float) - origin_s
+    a = np.asarray(alt_m, float)
+    keep = np.isfinite(t) & np.isfinite(a)
+    if keep.sum() < 2:
+        return None
+    t, a = t[keep], a[keep]
+    order = np.argsort(t, kind="stable")
+    return HeightSource(name=name, kind=kind, t_s=t[order], alt_m=a[order], home_relative=home_relative)
+
+
+def param_value(v: float | int) -> float:
+    """A parameter as the autopilot meant it: the shortest decimal that round-trips its float32
+    (0.95, not 0.949999988), so one value logged by ULog, DataFlash and MAVLink compares equal.
+    Integers pass unchanged (a float32 holds them exactly only up to 2²⁴)."""
+    if isinstance(v, int | np.integer):
+        return float(v)
+    f = np.float32(v)
+    return float(str(f)) if np.isfinite(f) else float(v)
 
 
 def motor_columns(df: pd.DataFrame) -> list[str]:
@@ -94,6 +167,13 @@ class FlightLog:
     meta: dict[str, Any] = field(default_factory=dict)
     missing: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    # every height stream the log carries, the estimator's first (see HeightSource)
+    heights: list[HeightSource] = field(default_factory=list)
+    # where the quaternion columns came from, e.g. "ATTITUDE_QUATERNION", "AHR2", "XKQ", "vehicle_attitude"
+    attitude_source: str | None = None
+    # autopilot parameters as the log has them (name → value), and where they came from
+    params: dict[str, float] = field(default_factory=dict)
+    params_source: str | None = None
 
     @property
     def name(self) -> str:
@@ -139,7 +219,7 @@ def resample(
     t_src = np.asarray(t_src, float)
     values = np.asarray(values)
     out_shape = (len(t_dst), *values.shape[1:])
-    if len(t_src) == 0:
+    if len(t_src) == 0 or 0 in values.shape[1:]:  # no samples, or no columns (every motor output zero)
         return np.full(out_shape, np.nan)
     order = np.argsort(t_src, kind="stable")
     t_src, values = t_src[order], values[order]
@@ -196,8 +276,11 @@ def build_state(t_s: np.ndarray, unix_s: np.ndarray | None, columns: dict[str, A
     df = df.sort_values("t_s", kind="stable").drop_duplicates("t_s", keep="last").reset_index(drop=True)
     if len(df) < 2:
         raise FlighttestError("no usable position samples (need at least 2)")
-    df["t_s"] = df["t_s"] - df["t_s"].iloc[0]
+    origin = float(df["t_s"].iloc[0])
+    df["t_s"] = df["t_s"] - origin
     df["mode"] = df["mode"].astype("string")
+    # the source-clock time of t_s = 0, so a loader can put its other streams (heights) on this clock
+    df.attrs["t_origin_s"] = origin
     return df
 
 

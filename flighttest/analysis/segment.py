@@ -12,8 +12,10 @@ thresholds live in :class:`SegmentConfig`.
 An **estimator glitch** is a sample whose altitude jumps away from its neighbours (more than
 ``glitch_jump_m`` off the running median over ``glitch_window_s``, or moving faster than
 ``glitch_speed_mps`` between samples): an altitude "jumping through the ground". Glitch samples are
-flagged (``state.glitch``), bridged by interpolation for the segmentation, and reported as glitches,
-never as descents.
+flagged (``state.glitch``), bridged by interpolation for the segmentation, and reported as glitches
+of kind ``"jump"``, never as descents. Samples the height arbitration already bridged
+(:mod:`flighttest.analysis.heights`, its ``"disagreement"`` glitches, passed as ``bridged``) are
+flagged the same way but not re-interpolated: their height is already the other sources'.
 """
 
 from __future__ import annotations
@@ -81,31 +83,48 @@ def _crossing(t: np.ndarray, h: np.ndarray, i: int, level: float) -> float:
     return float(t[i - 1] + np.clip(f, 0.0, 1.0) * (t[i] - t[i - 1]))
 
 
-def glitch_table(t: np.ndarray, d: np.ndarray, glitch: np.ndarray) -> pd.DataFrame:
+# One row per glitch span, whichever found it: "jump" (here) or "disagreement" (heights.py). ``source``
+# is the height that went wrong, ``sources`` what every height source said at the worst instant.
+GLITCH_COLUMNS = ["start_s", "end_s", "duration_s", "max_jump_m", "kind", "source", "sources"]
+
+
+def glitch_table(t: np.ndarray, d: np.ndarray, glitch: np.ndarray, source: str | None = None) -> pd.DataFrame:
+    """The "jump" glitch spans of height ``d`` (NED down) flagged in ``glitch``."""
     rows = []
     for a, b in _runs(glitch):
         ref = d[a - 1] if a > 0 else d[b + 1] if b + 1 < len(d) else np.nan
         rows.append(
             {
                 "start_s": float(t[a]),
+                "end_s": float(t[b]),
                 "duration_s": float(t[b] - t[a]),
                 "max_jump_m": float(np.nanmax(np.abs(d[a : b + 1] - ref))),
+                "kind": "jump",
+                "source": source,
+                "sources": {},
             }
         )
-    return pd.DataFrame(rows, columns=["start_s", "duration_s", "max_jump_m"])
+    return pd.DataFrame(rows, columns=GLITCH_COLUMNS)
 
 
-def find_descents(state: pd.DataFrame, cfg: SegmentConfig | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(descents, glitches). Sets ``state['glitch']``. Descent columns: see module docstring and
-    ``DESCENT_COLUMNS``; times on the state clock ``t_s``."""
+def find_descents(
+    state: pd.DataFrame,
+    cfg: SegmentConfig | None = None,
+    bridged: np.ndarray | None = None,
+    source: str | None = None,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(descents, jump glitches). Sets ``state['glitch']`` (jumps and ``bridged`` samples). Descent
+    columns: see module docstring and ``DESCENT_COLUMNS``; times on the state clock ``t_s``.
+    ``source`` names the height ``d_m`` holds, for the glitch table."""
     cfg = cfg or SegmentConfig()
     t = state["t_s"].to_numpy(float)
     d_raw = state["d_m"].to_numpy(float)
-    glitch = flag_glitches(t, d_raw, cfg)
+    jump = flag_glitches(t, d_raw, cfg)
+    glitch = jump if bridged is None else jump | np.asarray(bridged, dtype=bool)
     state["glitch"] = glitch
     d = d_raw.copy()
-    if glitch.any() and (~glitch).sum() >= 2:
-        d[glitch] = np.interp(t[glitch], t[~glitch], d_raw[~glitch])
+    if jump.any() and (~jump).sum() >= 2:
+        d[jump] = np.interp(t[jump], t[~jump], d_raw[~jump])
     h = -d
     n_s = _samples(t, cfg.smooth_s)
     rate = -np.gradient(pd.Series(h).rolling(n_s, center=True, min_periods=1).mean().to_numpy(), t)
@@ -177,7 +196,7 @@ def find_descents(state: pd.DataFrame, cfg: SegmentConfig | None = None) -> tupl
         )
     descents = pd.DataFrame(rows, columns=DESCENT_COLUMNS)
     descents.insert(0, "descent", np.arange(1, len(descents) + 1))
-    return descents, glitch_table(t, d_raw, glitch)
+    return descents, glitch_table(t, d_raw, jump, source)
 
 
 DESCENT_COLUMNS = [

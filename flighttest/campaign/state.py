@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from flighttest.errors import FlighttestError
 from flighttest.flightlog import write_json_atomic
+from flighttest.inputs import MAX_JSON_BYTES, InputFileError, read_text_file, shown
 
 STEPS = ("probe", "identify", "plan", "vertical", "helix", "report")
 FLIGHT_STEPS = frozenset({"probe", "vertical", "helix"})
@@ -92,22 +94,25 @@ class CampaignState:
     @classmethod
     def open(cls, root: Path, vehicle: str) -> CampaignState:
         """The campaign in ``root``: resumed if its record exists (for the same vehicle), else a new one."""
-        d = CampaignDir(Path(root))
+        root = Path(root)
+        d = CampaignDir(root)
         if root.exists() and not root.is_dir():
             raise FlighttestError(f"{root} is a file, not a campaign folder")
-        if not d.state_file.is_file():
+        if not d.state_file.exists():
             return cls(d, vehicle, time.time(), {s: StepRecord() for s in STEPS})
         try:
-            raw = json.loads(d.state_file.read_text(encoding="utf-8"))
-            if raw.get("format") != FORMAT:
-                raise ValueError(f"format {raw.get('format')!r}, expected {FORMAT!r}")
-            steps = {s: StepRecord(**raw["steps"].get(s, {})) for s in STEPS}
-            state = cls(d, str(raw["vehicle"]), float(raw["created_unix_s"]), steps)
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise FlighttestError(f"{d.state_file}: not a campaign record ({exc})") from None
+            text = read_text_file(d.state_file, "campaign record", MAX_JSON_BYTES)
+        except InputFileError as exc:
+            raise FlighttestError(f"{d.state_file}: not a campaign record ({exc.reason})") from None
+        try:
+            raw = json.loads(text)
+        except (ValueError, RecursionError) as exc:
+            why = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+            raise FlighttestError(f"{d.state_file}: not a campaign record ({why})") from None
+        state = cls(d, *_parse_record(raw, d.state_file))
         if state.vehicle != vehicle:
             raise FlighttestError(
-                f"{root} holds a campaign of vehicle '{state.vehicle}', not '{vehicle}': choose another -o folder"
+                f"{root} holds a campaign of vehicle {shown(state.vehicle)}, not '{vehicle}': choose another -o folder"
             )
         return state
 
@@ -186,3 +191,84 @@ class CampaignState:
         rec.outputs = {k: self._relative(v) if k in PATH_KEYS else v for k, v in (outputs or {}).items()}
         rec.error = error
         self.save()
+
+
+# -- reading campaign.json: every field of its documented type (docs/CONTRACTS.md), or one line ----------
+
+STATUSES = ("pending", "running", "done", "failed", "interrupted")
+_NUMBER_KEYS = frozenset({"guard_aborts", "speedup_helix_vs_vertical"})
+
+
+def _is_number(v: Any) -> bool:
+    return not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v)
+
+
+def _check_output(step: str, key: str, value: Any) -> str | None:
+    """Why an output value is not of its kind (paths are strings, figures finite numbers), or None."""
+    if value is None:
+        return None
+    if key == "files":
+        ok = isinstance(value, list) and all(isinstance(v, str) for v in value)
+        return None if ok else "must be a list of paths"
+    if key in PATH_KEYS:
+        return None if isinstance(value, str) and value.strip() else "must be a path"
+    if key in _NUMBER_KEYS or key.endswith(("_s", "_mps", "_mps2", "_m")):
+        return None if _is_number(value) else "must be a finite number"
+    if isinstance(value, str | bool | int | float):
+        return None
+    return None if isinstance(value, list | dict) else "has an unknown type"
+
+
+def _parse_record(raw: Any, where: Path) -> tuple[str, float, dict[str, StepRecord]]:
+    """``(vehicle, created_unix_s, steps)`` of a parsed ``campaign.json``; any other JSON shape —
+    a list, a string, steps as a list, numbers as strings — is one FlighttestError line."""
+
+    def bad(why: str) -> FlighttestError:
+        return FlighttestError(f"{where}: not a campaign record ({why})")
+
+    if not isinstance(raw, dict):
+        raise bad(f"a JSON {type(raw).__name__}, not an object")
+    if raw.get("format") != FORMAT:
+        raise bad(f"format {shown(raw.get('format'))}, expected {FORMAT!r}")
+    vehicle = raw.get("vehicle")
+    if not isinstance(vehicle, str) or not vehicle.strip():
+        raise bad(f"'vehicle' must be a name (got {shown(vehicle)})")
+    created = raw.get("created_unix_s")
+    if not _is_number(created):
+        raise bad(f"'created_unix_s' must be a number (got {shown(created)})")
+    steps_raw = raw.get("steps", {})
+    if not isinstance(steps_raw, dict):
+        raise bad(f"'steps' must be an object of the steps {', '.join(STEPS)} (got {shown(steps_raw)})")
+    for name in steps_raw:
+        if name not in STEPS:
+            raise bad(f"unknown step {shown(name)} (steps: {', '.join(STEPS)})")
+    steps: dict[str, StepRecord] = {}
+    known = {f.name for f in fields(StepRecord)}
+    for name in STEPS:
+        rec = steps_raw.get(name, {})
+        if not isinstance(rec, dict):
+            raise bad(f"step '{name}' must be an object (got {shown(rec)})")
+        for key in rec:
+            if key not in known:
+                raise bad(f"step '{name}': unknown key {shown(key)}")
+        status = rec.get("status", "pending")
+        if status not in STATUSES:
+            raise bad(f"step '{name}': status must be one of {', '.join(STATUSES)} (got {shown(status)})")
+        for key in ("started_unix_s", "elapsed_s"):
+            if rec.get(key) is not None and not _is_number(rec[key]):
+                raise bad(f"step '{name}': '{key}' must be a number (got {shown(rec[key])})")
+        outputs = rec.get("outputs", {})
+        if outputs is None:
+            outputs = {}
+        if not isinstance(outputs, dict):
+            raise bad(f"step '{name}': 'outputs' must be an object (got {shown(outputs)})")
+        for key, value in outputs.items():
+            why = _check_output(name, key, value)
+            if why:
+                raise bad(f"step '{name}': output '{key}' {why} (got {shown(value)})")
+        error = rec.get("error")
+        if error is not None and not isinstance(error, str):
+            raise bad(f"step '{name}': 'error' must be text (got {shown(error)})")
+        steps[name] = StepRecord(status=status, started_unix_s=rec.get("started_unix_s"),
+                                 elapsed_s=rec.get("elapsed_s"), outputs=dict(outputs), error=error)  # fmt: skip
+    return vehicle, float(created), steps

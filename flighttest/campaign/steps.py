@@ -94,11 +94,13 @@ def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfi
         confirm=ctx.confirm, print_fn=ctx.print_fn,
     )  # fmt: skip
     out = asyncio.run(fly(req))
+    # log_dir is None when nothing answered (the flight left no folder)
+    aborts = guard_aborts(Path(out.log_dir)) if out.log_dir else 0
     rec = {"log_dir": out.log_dir, "outcome": out.outcome, "abort_reason": out.abort_reason,
-           "descent_time_s": out.descent_time_s, "guard_aborts": guard_aborts(Path(out.log_dir))}  # fmt: skip
+           "descent_time_s": out.descent_time_s, "guard_aborts": aborts}  # fmt: skip
     if out.outcome not in FLIGHT_OK[step]:
         why = out.abort_reason or "no reason given"
-        raise StepFailed(f"{step} flight {out.outcome}: {why} (log {out.log_dir})", rec)
+        raise StepFailed(f"{step} flight {out.outcome}: {why}" + (f" (log {out.log_dir})" if out.log_dir else ""), rec)
     return rec
 
 

@@ -28,8 +28,11 @@ every command that reports numbers takes --json; bad input exits with code 2 and
 
 def build_parser() -> argparse.ArgumentParser:
     from flighttest.cli import analysis, campaign, fly, plan, region, sim, vehicle
+    from flighttest.inputs import ArgumentParser
 
-    parser = argparse.ArgumentParser(
+    # flighttest.inputs.ArgumentParser (one-line errors, negative numbers in any notation); the
+    # sub-commands' parsers are of the same class
+    parser = ArgumentParser(
         prog="flighttest",
         description=DESCRIPTION,
         epilog=EPILOG,
@@ -42,15 +45,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _wants_json(argv: list[str]) -> bool:
+    """``--json`` among the options (before a ``--``), known before parsing: a refused command line
+    must answer in JSON too."""
+    words = argv[: argv.index("--")] if "--" in argv else argv
+    return "--json" in words
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
+    from flighttest import console
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    as_json = _wants_json(argv)
+    console.json_printed = False
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        as_json = bool(getattr(args, "json", as_json))
         return int(args.func(args) or 0)
     except FlighttestError as exc:
+        # with --json stdout is JSON in every outcome: {"error"} unless the command printed its own
+        # failure object already
+        if as_json and not console.json_printed and not getattr(exc, "json_printed", False):
+            console.print_json({"error": str(exc)})
         print(f"flighttest: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:

@@ -8,9 +8,11 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+from rich.measure import Measurement
 from rich.table import Table
+from rich.text import Text
 
-from flighttest.analysis.compare import add_speedup, compare_row
+from flighttest.analysis.compare import add_param_differences, add_speedup, compare_row
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
 
@@ -52,6 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "when a folder is walked)",
     )
     pa.add_argument("--jobs", type=int, metavar="N", help="worker processes (default: every core)")
+    pa.add_argument("--wide", action="store_true", help="every column, however narrow the terminal")
     _add_segment_options(pa)
     pa.set_defaults(func=cmd_analyse)
 
@@ -59,6 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     pc.add_argument("logs", nargs="+", type=Path, metavar="LOG")
     pc.add_argument("--vehicle", metavar="NAME", help="vehicle profile (default: from each log)")
     pc.add_argument("--json", action="store_true", help="machine-readable output")
+    pc.add_argument("--wide", action="store_true", help="one row per flight, however narrow the terminal")
     _add_segment_options(pc)
     pc.set_defaults(func=cmd_compare)
 
@@ -141,39 +145,128 @@ def _num(v, fmt: str = "{:.2f}") -> str:
     return fmt.format(v)
 
 
-def _descent_table(title: str, d: pd.DataFrame) -> Table:
-    t = Table(title=title, title_justify="left")
-    for col in (
-        "#",
-        "start s",
-        "duration s",
-        "height m",
-        "mean m/s",
-        "max m/s",
-        "horiz. m",
-        "inside s",
-        "near s",
-        "min margin m/s",
-        "fluct. max",
-        "phase",
-    ):
-        t.add_column(col, justify="right" if col != "phase" else "left")
-    for r in d.itertuples():
-        t.add_row(
-            str(r.descent),
-            _num(r.start_s),
-            _num(r.duration_s),
-            _num(r.height_m),
-            _num(r.mean_rate_mps),
-            _num(r.max_rate_mps),
-            _num(r.horizontal_excursion_m),
-            _num(r.time_inside_s),
-            _num(r.time_near_s),
-            _num(r.min_margin_mps),
-            _num(r.fluct_index_max, "{:.1f}"),
-            str(r.phase or "–") if isinstance(r.phase, str) else "–",
-        )
+# -- tables that fit the terminal ------------------------------------------------------------------
+# rich squeezes a table wider than the terminal by cutting headers and values to "sta…", "2.…":
+# unreadable. Every table here is measured first and, when it does not fit, printed with fewer
+# columns or stacked (one column per descent / flight) — with full headers and values always.
+
+
+def _natural_width(table: Table) -> int:
+    """The width ``table`` needs to show every header and value unwrapped and uncut."""
+    return Measurement.get(console, console.options.update_width(100_000), table).maximum
+
+
+def _fits(table: Table, width: int | None = None) -> bool:
+    return _natural_width(table) <= (width or console.width)
+
+
+def _print_table(table: Table) -> None:
+    """Print at the table's own width even when that is wider than the terminal (``--wide``):
+    lines longer than the terminal wrap there, but nothing is cut."""
+    need = _natural_width(table)
+    if need > console.width:
+        table.width = need
+        console.print(table, crop=False)
+    else:
+        console.print(table)
+
+
+def _row_table(title: str | None, headers: list[str], rows: list[list[str]], left: tuple[str, ...] = ()) -> Table:
+    t = Table(title=Text(title) if title else None, title_justify="left")
+    for h in headers:
+        t.add_column(h, justify="left" if h in left else "right", no_wrap=True)
+    for r in rows:
+        t.add_row(*r)
     return t
+
+
+def _stacked_tables(
+    title: str | None, labels: list[str], columns: list[tuple[str, list[str]]], width: int | None = None
+) -> list:
+    """One row per label and one column per item (``columns``: (header, values)), split into as many
+    tables as it takes for each to fit ``width`` (at least one item per table). The title goes on a
+    line of its own: a narrow table would wrap it."""
+    width = width or console.width
+    out: list = [Text(title)] if title else []
+    if not columns:
+        return [*out, _stacked(None, labels, [])]
+    i = 0
+    while i < len(columns):
+        n = 1
+        while i + n < len(columns) and _fits(_stacked(None, labels, columns[i : i + n + 1]), width):
+            n += 1
+        out.append(_stacked(None, labels, columns[i : i + n]))
+        i += n
+    return out
+
+
+def _stacked(title: str | None, labels: list[str], columns: list[tuple[str, list[str]]]) -> Table:
+    t = Table(title=title, title_justify="left")
+    t.add_column("", no_wrap=True)
+    for header, _ in columns:
+        t.add_column(header, justify="right", no_wrap=True)
+    for k, label in enumerate(labels):
+        t.add_row(label, *(values[k] for _, values in columns))
+    return t
+
+
+DESCENT_COLUMNS = {  # header: (descents column, format)
+    "#": ("descent", "{}"),
+    "start s": ("start_s", "{:.2f}"),
+    "duration s": ("duration_s", "{:.2f}"),
+    "height m": ("height_m", "{:.2f}"),
+    "mean m/s": ("mean_rate_mps", "{:.2f}"),
+    "max m/s": ("max_rate_mps", "{:.2f}"),
+    "horiz. m": ("horizontal_excursion_m", "{:.2f}"),
+    "inside s": ("time_inside_s", "{:.2f}"),
+    "near s": ("time_near_s", "{:.2f}"),
+    "min margin m/s": ("min_margin_mps", "{:.2f}"),
+    "fluct. max": ("fluct_index_max", "{:.1f}"),
+    "phase": ("phase", "{}"),
+}
+# what a narrow terminal keeps: when, how long, how far, how fast, how long inside the guard region
+DESCENT_ESSENTIALS = ("#", "start s", "duration s", "height m", "max m/s", "inside s", "phase")
+
+
+def _descent_cells(d: pd.DataFrame) -> list[list[str]]:
+    rows = []
+    for r in d.to_dict("records"):
+        cells = []
+        for header, (key, fmt) in DESCENT_COLUMNS.items():
+            v = r.get(key)
+            if header == "phase":
+                cells.append(v if isinstance(v, str) and v else "–")
+            elif header == "#":
+                cells.append(str(v))
+            else:
+                cells.append(_num(v, fmt))
+        rows.append(cells)
+    return rows
+
+
+def descent_tables(title: str, d: pd.DataFrame, wide: bool = False, width: int | None = None) -> list:
+    """The per-descent table of one log as renderables that fit ``width`` (the terminal's by default):
+    every column when they fit (or ``wide``), else the essential columns and a line naming the others,
+    else one column per descent, stacked into as many tables as it takes."""
+    width = width or console.width
+    headers = list(DESCENT_COLUMNS)
+    rows = _descent_cells(d)
+    full = _row_table(None, headers, rows, left=("phase",))
+    if wide or _fits(full, width):
+        return [Text(title), full]  # the title on its own line: as the table's, it would wrap at the table's width
+    keep = [headers.index(h) for h in DESCENT_ESSENTIALS]
+    narrow = _row_table(None, list(DESCENT_ESSENTIALS), [[r[i] for i in keep] for r in rows], left=("phase",))
+    if _fits(narrow, width):
+        return [Text(title), narrow, Text("  --wide, --json and --csv show every column")]
+    return _stacked_tables(title, headers[1:], [(f"#{r[0]}", r[1:]) for r in rows], width)
+
+
+def _print_all(renderables: list) -> None:
+    for item in renderables:
+        if isinstance(item, Table):
+            _print_table(item)
+        else:
+            console.print(item)
 
 
 def cmd_analyse(args: argparse.Namespace) -> int:
@@ -188,16 +281,11 @@ def cmd_analyse(args: argparse.Namespace) -> int:
     else:
         for r in results:
             s = r["summary"]
-            console.print(
-                _descent_table(
-                    f"{s['log']} ({s['source']}, {s['duration_s']:.1f} s, vehicle {s['vehicle'] or '–'})", r["descents"]
-                )
-            )
+            title = f"{s['log']} ({s['source']}, {s['duration_s']:.1f} s, vehicle {s['vehicle'] or '–'})"
+            _print_all(descent_tables(title, r["descents"], wide=args.wide))
+            _print_sources(s)
             for g in s["glitches"]:
-                console.print(
-                    f"  estimator glitch at {g['start_s']:.2f} s: altitude jumped {g['max_jump_m']:.1f} m "
-                    f"for {g['duration_s']:.2f} s (not a descent)"
-                )
+                console.print(Text(_glitch_line(g)))
             for k, v in s["missing"].items():
                 console.print(f"  missing {k}: {v}")
             for n in s["notes"]:
@@ -220,44 +308,126 @@ def cmd_analyse(args: argparse.Namespace) -> int:
     return 2 if errors else 0
 
 
+def _glitch_line(g: dict) -> str:
+    """One estimator glitch in words: an altitude jump, or a span where the height sources disagreed."""
+    when = f"at {_num(g.get('start_s'))} s for {_num(g.get('duration_s'))} s"
+    if g.get("kind") == "disagreement":
+        said = g.get("sources") if isinstance(g.get("sources"), dict) else {}
+        detail = ", ".join(f"{k} {_num(v, '{:.1f}')} m" for k, v in said.items())
+        return (
+            f"  estimator glitch {when}: {g.get('source') or 'a height source'} disagreed with the others by "
+            f"{_num(g.get('max_jump_m'), '{:.1f}')} m" + (f" ({detail})" if detail else "") + " (not a descent)"
+        )
+    what = f" ({g['source']})" if g.get("source") else ""
+    return f"  estimator glitch{what} {when}: altitude jumped {_num(g.get('max_jump_m'), '{:.1f}')} m (not a descent)"
+
+
+def _print_sources(s: dict) -> None:
+    """Where the log's height, attitude and parameters came from (keys the summary may carry)."""
+    if s.get("height_source"):
+        console.print(f"  height from: {s['height_source']}")
+    if "attitude_source" in s:
+        console.print(f"  attitude from: {s['attitude_source'] or 'none in the log'}")
+    if "params" in s:
+        params = s.get("params") or {}
+        src = f" (from {s['params_source']})" if s.get("params_source") else ""
+        console.print(
+            f"  parameters{src}: {len(params)} that shape these tests (--json, report)"
+            if params
+            else f"  parameters{src}: none that shape these tests in the log"
+        )
+
+
+COMPARE_COLUMNS = {  # header: (key, format)
+    "outcome": ("outcome", "{}"),
+    "height m": ("height_m", "{:.2f}"),
+    "duration s": ("duration_s", "{:.2f}"),
+    "rest-to-rest s": ("descent_time_s", "{:.2f}"),
+    "speed-up ×": ("speedup_vs_first", "{:.2f}"),
+    "mean m/s": ("mean_rate_mps", "{:.2f}"),
+    "max m/s": ("max_rate_mps", "{:.2f}"),
+    "inside s": ("time_inside_s", "{:.2f}"),
+    "near s": ("time_near_s", "{:.2f}"),
+    "min margin m/s": ("min_margin_mps", "{:.2f}"),
+    "fluct. max": ("fluct_index_max", "{:.1f}"),
+}
+
+
+def _flight_headers(names: list[str], kinds: list[str], labels: list[str], cells: list[list[str]], width: int):
+    """Column headers for one column per flight: "name\\nkind" when those fit, else "1", "2", ...
+    with a legend (long folder names would not fit two flights into 80 columns)."""
+    full = [f"{n}\n{k}" for n, k in zip(names, kinds)]
+    if _fits(_stacked(None, labels, list(zip(full, cells))), width):
+        return full, []
+    legend = [Text(f"  {i}: {n} ({k})") for i, (n, k) in enumerate(zip(names, kinds), start=1)]
+    return [str(i) for i in range(1, len(names) + 1)], legend
+
+
+def compare_tables(rows: list[dict], wide: bool = False, width: int | None = None) -> list:
+    """``flighttest compare`` as renderables that fit ``width``: one row per flight when that fits
+    (or ``wide``), else one column per flight (numbered, with a legend, when the names are long),
+    then the parameters that differ between the flights."""
+    width = width or console.width
+    names = [Path(row["log"]).name for row in rows]
+    kinds = [str(row.get("trajectory") or row.get("mission") or "–") for row in rows]
+    title = "descent times side by side (the main descent of each flight)"
+    values = [[_num(row.get(key), fmt) for key, fmt in COMPARE_COLUMNS.values()] for row in rows]
+    flat = _row_table(
+        title, ["log", "mission", *COMPARE_COLUMNS], [[n, k, *v] for n, k, v in zip(names, kinds, values)],
+        left=("log", "mission", "outcome"),
+    )  # fmt: skip
+    out: list = []
+    labels = list(COMPARE_COLUMNS)
+    headers, legend = [f"{n}\n{k}" for n, k in zip(names, kinds)], []
+    if wide or _fits(flat, width):
+        out.append(flat)
+    else:
+        per_flight = [list(col) for col in zip(*values)] if values else []
+        cells = [[v[k] for v in per_flight] for k in range(len(rows))]
+        headers, legend = _flight_headers(names, kinds, labels, cells, width)
+        out += [Text(title), *legend, *_stacked_tables(None, labels, list(zip(headers, cells)), width)]
+    out += param_difference_tables(rows, headers, wide, width)
+    return out
+
+
+def param_difference_tables(rows: list[dict], headers: list[str], wide: bool = False, width: int | None = None):
+    """The relevant parameters not the same in every flight (rows' ``param_differences``), one row
+    per parameter and one column per flight (``headers``)."""
+    from flighttest.analysis.params import format_value
+
+    width = width or console.width
+    diff_names = list(rows[0].get("param_differences") or {}) if rows else []
+    with_params = sum(bool(row.get("params")) for row in rows)
+    if len(rows) < 2:
+        return []
+    if with_params < 2:
+        return [Text(f"parameters: {with_params} of {len(rows)} logs carry them, nothing to compare")]
+    if not diff_names:
+        return [Text(f"parameters: the {with_params} logs that carry them were set up alike")]
+    title = f"parameters that differ between the flights ({len(diff_names)})"
+    columns = [(h, [format_value(row["param_differences"][n]) for n in diff_names]) for h, row in zip(headers, rows)]
+    if wide:
+        return [_stacked(title, diff_names, columns)]
+    return [*_stacked_tables(title, diff_names, columns, width), Text("  –: that log does not have the parameter")]
+
+
 def cmd_compare(args: argparse.Namespace) -> int:
     results, errors = _run(args.logs, args.vehicle, _seg_config(args))
-    rows = [compare_row(r["summary"]["log"], r["descents"], r["events"]) for r in results]
+    rows = [
+        compare_row(
+            r["summary"]["log"], r["descents"], r["events"], r.get("meta") or {}, r["summary"].get("params") or {}
+        )
+        for r in results
+    ]
     # flighttest's own logs know when each descent started and came to rest: compare those; others by segment
     basis = "descent_time_s" if rows and all(row.get("descent_time_s") for row in rows) else "duration_s"
     for row in add_speedup(rows, key=basis):
         row["speedup_basis"] = basis
+    add_param_differences(rows)
     if args.json:
         print_json(rows)
     else:
-        columns = {  # header: (key, format)
-            "height m": ("height_m", "{:.2f}"),
-            "duration s": ("duration_s", "{:.2f}"),
-            "rest-to-rest s": ("descent_time_s", "{:.2f}"),
-            "speed-up ×": ("speedup_vs_first", "{:.2f}"),
-            "mean m/s": ("mean_rate_mps", "{:.2f}"),
-            "max m/s": ("max_rate_mps", "{:.2f}"),
-            "inside s": ("time_inside_s", "{:.2f}"),
-            "near s": ("time_near_s", "{:.2f}"),
-            "min margin m/s": ("min_margin_mps", "{:.2f}"),
-            "fluct. max": ("fluct_index_max", "{:.1f}"),
-        }
-        names = [Path(row["log"]).name for row in rows]
-        kinds = [str(row.get("trajectory") or row.get("mission") or "–") for row in rows]
-        title = "descent times side by side (the main descent of each flight)"
-        t = Table(title=title, title_justify="left")
-        if console.width < 140 and len(rows) <= 6:  # a narrow terminal: one column per flight
-            t.add_column("")
-            for name, kind in zip(names, kinds):
-                t.add_column(f"{name}\n{kind}", justify="right")
-            for header, (key, fmt) in columns.items():
-                t.add_row(header, *(_num(row.get(key), fmt) for row in rows))
-        else:
-            for col in ("log", "mission", *columns):
-                t.add_column(col, justify="left" if col in ("log", "mission") else "right")
-            for name, kind, row in zip(names, kinds, rows):
-                t.add_row(name, kind, *(_num(row.get(key), fmt) for key, fmt in columns.values()))
-        console.print(t)
+        _print_all(compare_tables(rows, wide=args.wide))
         console.print(
             "duration: the main descent found in the log; rest-to-rest: flighttest's own logs, from the first "
             "setpoint of the descent to rest at its end point; speed-up × = the first log's "

@@ -35,6 +35,7 @@ from rich.table import Table
 from flighttest.campaign.state import FLIGHT_STEPS, STEPS, TITLES, CampaignState
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
+from flighttest.inputs import Range, shown
 
 SIM_DEFAULT_PARAMS = {"MPC_Z_VEL_MAX_DN": 3.0}  # rehearsal: let offboard descents through unclipped
 
@@ -46,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     link.add_argument("--connect", metavar="URL",
                       help="the vehicle: udpin://0.0.0.0:14540, serial:///dev/ttyUSB0:57600, …")
     link.add_argument("--sim", action="store_true", help="fly the built-in fake vehicle (started and stopped here)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="the campaign's folder")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="the campaign's folder")
     p.add_argument("--vehicle", metavar="NAME", help="vehicle profile name or .toml path (with --sim default x500)")
     _add_common(p)
     steps = p.add_mutually_exclusive_group()
@@ -57,7 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d = sub.add_parser("demo", help="= campaign --sim --yes -o logs/demo-<time>: the whole job on the fake",
                        description="The whole campaign against the built-in fake vehicle, without prompts "
                        "(flighttest campaign --sim --yes).")  # fmt: skip
-    d.add_argument("-o", "--output", type=Path, metavar="DIR", help="the campaign's folder (default logs/demo-<time>)")
+    d.add_argument("-o", "--output", metavar="DIR", help="the campaign's folder (default logs/demo-<time>)")
     d.add_argument("--vehicle", metavar="NAME", default="x500", help="vehicle profile (default x500)")
     _add_common(d)
     d.set_defaults(func=cmd_demo)
@@ -82,13 +83,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from flighttest.flightlog import default_log_root
 
     args.sim, args.connect, args.only, args.start, args.yes = True, None, None, None, True
-    args.output = args.output or default_log_root() / f"demo-{dt.datetime.now():%Y%m%d-%H%M%S}"
+    args.output = args.output or str(default_log_root() / f"demo-{dt.datetime.now():%Y%m%d-%H%M%S}")
     return cmd_campaign(args)
+
+
+# the stale-telemetry allowance: 1 period is the field's tightest; beyond 50 (1 s at 50 Hz) the
+# guard would fly on for a second without knowing where the vehicle is
+STALE_PERIODS = Range(1.0, 50.0, "telemetry periods")
+SEED = Range(0, 2**32 - 1, integer=True)  # what the fake's random generator takes
 
 
 def _validate(args: argparse.Namespace) -> dict[str, Any]:
     """Every input checked before the fake starts or anything connects; returns the fake's options."""
-    from flighttest.link import check_url
+    from flighttest import inputs as ip
+    from flighttest.link import check_connection, check_url
 
     if args.connect:
         check_url(args.connect)
@@ -96,22 +104,20 @@ def _validate(args: argparse.Namespace) -> dict[str, Any]:
             raise FlighttestError("--vehicle is required with --connect (the profile of the aircraft you fly)")
         if args.truth_onset is not None or args.sim_wind or args.sim_seed is not None or args.sim_param:
             raise FlighttestError("--truth-onset, --sim-wind, --sim-seed and --sim-param need --sim")
-    if args.stale_periods is not None and not (math.isfinite(args.stale_periods) and args.stale_periods >= 1):
-        raise FlighttestError(f"--stale-periods must be a number ≥ 1 (got {args.stale_periods})")
-    if args.truth_onset is not None and not (math.isfinite(args.truth_onset) and args.truth_onset > 0):
-        raise FlighttestError(f"--truth-onset must be a positive number (got {args.truth_onset})")
-    if args.sim_wind and not all(math.isfinite(w) for w in args.sim_wind):
-        raise FlighttestError("--sim-wind must be three finite numbers")
+    if args.stale_periods is not None:
+        STALE_PERIODS.check(args.stale_periods, "--stale-periods")
+    if args.truth_onset is not None:
+        ip.W_ALLOW_POSITIVE_MPS.check(args.truth_onset, "--truth-onset")
+    for axis, w in zip("NED", args.sim_wind or ()):
+        ip.WIND_MPS.check(w, f"--sim-wind {axis}")
+    if args.sim_seed is not None:
+        SEED.check(args.sim_seed, "--sim-seed")
     params: dict[str, float] = dict(SIM_DEFAULT_PARAMS)
     for item in args.sim_param:
-        name, _, value = item.partition("=")
-        try:
-            number = float(value)
-        except ValueError:
-            number = None
-        if not name.strip() or number is None:
-            raise FlighttestError(f"--sim-param must be NAME=NUMBER (got {item!r})")
-        params[name.strip()] = number
+        name, value = _sim_param(item)
+        params[name] = value
+    if args.connect:
+        check_connection(args.connect)  # last: a host name may take a moment to resolve
     opts: dict[str, Any] = {"param": params}
     if args.truth_onset is not None:
         opts["truth_onset"] = args.truth_onset
@@ -122,12 +128,78 @@ def _validate(args: argparse.Namespace) -> dict[str, Any]:
     return opts
 
 
+def _output_dir(text: str | Path) -> Path:
+    """``-o DIR`` as a folder the campaign can live in, checked before anything is written (an empty
+    name would be the current folder; a file, or a folder under a file, cannot hold a campaign)."""
+    import os
+
+    text = os.fspath(text)
+    if not text.strip() or any(not c.isprintable() for c in text):
+        raise FlighttestError(f"-o {shown(text)}: not a folder name (empty, or a control character)")
+    root = Path(text)
+    probe = root
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise FlighttestError(f"-o {text}: {probe} is a file, not a folder")
+    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
+        raise FlighttestError(f"-o {text}: the folder {probe} is not writable")
+    return root
+
+
+def _sim_param(item: str) -> tuple[str, float]:
+    """``NAME=NUMBER`` for a parameter the fake has (its start would fail on any other, after the
+    campaign had begun), integer parameters as integers."""
+    from sitl_fakes.px4 import PARAM_INT32, default_params
+
+    name, sep, value = item.partition("=")
+    name, value = name.strip(), value.strip()
+    known = default_params()
+    if not sep or not name:
+        raise FlighttestError(f"--sim-param must be NAME=NUMBER (got {shown(item)})")
+    if name not in known:
+        raise FlighttestError(f"--sim-param {shown(name)}: not a parameter of the fake (see sitl_fakes/px4.py)")
+    try:
+        number = int(value, 10) if known[name].type == PARAM_INT32 else float(value)
+    except ValueError:
+        kind = "a whole number" if known[name].type == PARAM_INT32 else "a number"
+        raise FlighttestError(f"--sim-param {name}: must be {kind} (got {shown(value)})") from None
+    if not (math.isfinite(number) and abs(number) <= 1e6):  # no PX4 parameter the fake has goes beyond
+        raise FlighttestError(f"--sim-param {name}: must be a finite number of at most 1e6 (got {shown(value)})")
+    return name, number
+
+
 def _clock(seconds: float) -> str:
     m, s = divmod(round(seconds), 60)
     return f"{m:d}:{s:02d}"
 
 
+class CampaignFailed(FlighttestError):
+    """An unexpected error inside a step: one line (the step is marked failed in campaign.json)."""
+
+    exit_code = 1
+
+
 def cmd_campaign(args: argparse.Namespace) -> int:
+    """The campaign; with ``--json`` stdout is JSON whatever happens (the summary, or the failure)."""
+    from flighttest.cli.fly import json_failure
+
+    try:
+        return _campaign(args)
+    except FlighttestError as exc:
+        json_failure(exc, args.json, out_dir=str(args.output))
+        raise
+    except KeyboardInterrupt:
+        if args.json:
+            print_json({"error": "interrupted by the operator", "outcome": "interrupted", "out_dir": str(args.output)})
+        raise
+    except Exception as exc:  # a bug or a library's surprise: one line, the details in campaign.json
+        err = CampaignFailed(f"campaign stopped by an unexpected error: {type(exc).__name__}: {exc}")
+        json_failure(err, args.json, out_dir=str(args.output))
+        raise err from exc
+
+
+def _campaign(args: argparse.Namespace) -> int:
     from flighttest.campaign.steps import RUNNERS, StepContext, StepFailed, write_configs
     from flighttest.cli.fly import confirm_go
     from flighttest.profiles import load_profile
@@ -135,13 +207,14 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     sim_opts = _validate(args)
     vehicle = args.vehicle or "x500"
     profile = load_profile(vehicle)
-    state = CampaignState.open(args.output, profile.name)
+    state = CampaignState.open(_output_dir(args.output), profile.name)
     steps = state.to_run(args.only, args.start)
     state.check_needs(steps)
-    write_configs(state.dir)
-    out = err_console if args.json else console
+    # refused before anything is written: a campaign that cannot start leaves no folder behind
     if steps and not args.yes and not sys.stdin.isatty():
         raise FlighttestError("no terminal to confirm each step: pass --yes to run the campaign unattended")
+    write_configs(state.dir)
+    out = err_console if args.json else console
     state.save()
 
     with contextlib.ExitStack() as stack:

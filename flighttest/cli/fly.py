@@ -1,9 +1,10 @@
 """``flighttest fly probe|helix|vertical|TRAJECTORY_FILE --connect URL --vehicle NAME``.
 
-The three named missions are the scripts in ``missions/`` (each with its TOML config beside it);
-a trajectory file is flown as planned. Prints the preflight table, asks go/no-go (``--yes`` skips
-it; without a terminal and without ``--yes`` it refuses to arm), flies with the live guard, and
-prints the flight's log folder at the end (``--json``: the summary).
+The three named missions are mission scripts, each with its TOML config beside it (the user's
+copies first, else the shipped ones: see the end of ``--help``); a trajectory file is flown as
+planned. Prints the preflight table, asks go/no-go (``--yes`` skips it; without a terminal and
+without ``--yes`` it refuses to arm), flies with the live guard, and prints the flight's log folder
+at the end (``--json``: the summary).
 """
 
 from __future__ import annotations
@@ -11,27 +12,35 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
-import math
 import sys
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
-from flighttest.mission_scripts import MISSIONS, load_mission_module
+from flighttest.mission_scripts import MISSIONS, load_mission_module, search_dirs
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fly", help="fly a mission or trajectory file in offboard with the live VRS guard",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+                       description=__doc__, epilog=missions_epilog(),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     add_fly_arguments(p)
     p.set_defaults(func=cmd_fly)
+
+
+def missions_epilog() -> str:
+    scripts = ", ".join(f"{m}: {s}.py" for m, s in MISSIONS.items())
+    dirs = "\n".join(f"  {d}" for d in search_dirs())
+    return (f"named missions ({scripts}) are taken from the first of these folders that has them\n"
+            f"(to edit one, copy its script and TOML into the first):\n{dirs}")  # fmt: skip
 
 
 def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
     if target:
         p.add_argument("target", metavar="probe|helix|vertical|TRAJECTORY_FILE",
-                       help="a named mission (missions/*.py) or a trajectory file (NAME.csv + NAME.json)")  # fmt: skip
+                       help="a named mission (see below) or a trajectory file (NAME.csv + NAME.json)")  # fmt: skip
     p.add_argument("--connect", required=True, metavar="URL",
                    help="vehicle link: udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT, serial://DEV:BAUD")
     p.add_argument("--vehicle", required=True, metavar="NAME", help="vehicle profile name or .toml path")
@@ -48,31 +57,61 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
     p.add_argument("--yes", action="store_true", help="skip the go/no-go prompt")
     p.add_argument("--dry-run", action="store_true", help="connect, plan and check; do not arm")
     p.add_argument("--no-land", action="store_true", help="end in Hold at the end point instead of landing")
-    p.add_argument("--log-dir", type=Path, metavar="DIR", help="root folder of flight logs (default logs/)")
+    p.add_argument("--log-dir", metavar="DIR",
+                   help="root folder of flight logs (default $FLIGHTTEST_LOG_DIR, else logs/)")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the flight summary as JSON")
 
 
-def _finite(name: str, v: float | None, positive: bool = True) -> None:
-    if v is not None and not (math.isfinite(v) and (v > 0 if positive else v >= 0)):
-        raise FlighttestError(f"{name} must be a {'positive' if positive else 'non-negative'} number (got {v})")
+def _check_numbers(args: argparse.Namespace) -> None:
+    """Every number of the command line within its physical range (``flighttest.inputs``), before
+    any file is read or anything connects."""
+    from flighttest import inputs as ip
+
+    checks = (("--height", args.height, ip.START_HEIGHT_M), ("--min-alt", args.min_alt, ip.ALTITUDE_FLOOR_M),
+              ("--geofence-radius", args.geofence_radius, ip.DISTANCE_M),
+              ("--max-descent-speed", args.max_descent_speed, ip.SPEED_MPS),
+              ("--sysid", args.sysid, ip.SYSID))  # fmt: skip
+    for name, value, rng in checks:
+        if value is not None:
+            rng.check(value, name)
+    for axis, w in zip("NED", args.wind_ned or ()):
+        ip.WIND_MPS.check(w, f"--wind-ned {axis}")
+
+
+def log_root(text: str | None) -> Path:
+    """The root folder of flight logs (``--log-dir``, else ``$FLIGHTTEST_LOG_DIR``, else ``logs``), checked
+    before anything connects: a folder there must be possible. Nothing is created here."""
+    import os
+
+    if text is None:
+        env = os.environ.get("FLIGHTTEST_LOG_DIR")
+        name, text = "$FLIGHTTEST_LOG_DIR", (env if env is not None else "logs")
+    else:
+        name = "--log-dir"
+    if not text.strip() or any(not c.isprintable() for c in text):
+        raise FlighttestError(f"{name} {text!r}: not a folder name (empty, or a control character)")
+    root = Path(text)
+    probe = root
+    while not probe.exists() and probe != probe.parent:  # the nearest folder that exists
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise FlighttestError(f"{name} {text}: {probe} is a file, not a folder")
+    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
+        raise FlighttestError(f"{name} {text}: the folder {probe} is not writable")
+    return root
 
 
 def build_request(args: argparse.Namespace, mission: str | None = None, module: ModuleType | None = None):
     """Profile, config (file + command-line overrides), trajectory → ``FlyRequest``."""
-    from flighttest.link import check_url
-    from flighttest.mission import FlyRequest
+    from flighttest.link import check_connection, check_url
+    from flighttest.mission import FlyRequest, check_duration
     from flighttest.missions_config import MissionConfig, load_mission_config
     from flighttest.profiles import load_profile
     from flighttest.trajectory import Trajectory
 
     check_url(args.connect)
-    _finite("--height", args.height)
-    _finite("--min-alt", args.min_alt, positive=False)
-    _finite("--geofence-radius", args.geofence_radius)
-    if args.wind_ned is not None and not all(math.isfinite(w) for w in args.wind_ned):
-        raise FlighttestError("--wind-ned must be three finite numbers")
-    if args.sysid is not None and not 1 <= args.sysid <= 255:
-        raise FlighttestError(f"--sysid must be 1..255 (got {args.sysid})")
+    _check_numbers(args)
+    root = log_root(args.log_dir)
     profile = load_profile(args.vehicle)
     target = mission or args.target
     if module is None and target in MISSIONS:
@@ -95,7 +134,6 @@ def build_request(args: argparse.Namespace, mission: str | None = None, module: 
     if overrides:
         cfg = cfg.with_flight(**overrides)
     if args.max_descent_speed is not None:
-        _finite("--max-descent-speed", args.max_descent_speed)
         if cfg.mission != "probe":
             raise FlighttestError("--max-descent-speed applies to the probe mission only")
         cfg = dataclasses.replace(cfg, plan={**cfg.plan, "max_descent_mps": args.max_descent_speed})
@@ -104,24 +142,26 @@ def build_request(args: argparse.Namespace, mission: str | None = None, module: 
             f"start height {cfg.flight.start_height_m:g} m must exceed the altitude floor {cfg.flight.min_alt_m:g} m"
         )
     if module is not None:
-        traj = module.plan(profile, cfg)
+        try:
+            traj = module.plan(profile, cfg)
+        except FlighttestError:
+            raise
+        except Exception as exc:  # the plan follows from the profile and the config alone: they are at fault
+            where = cfg.path or "its config"
+            raise FlighttestError(f"cannot plan the {cfg.mission} mission from {where}: {exc}") from None
         name, traj_path = cfg.mission, ""
     else:
         traj = Trajectory.load(args.target, profile)
         name, traj_path = Path(args.target).stem, str(args.target)
+    check_duration(traj, f"trajectory {traj_path}" if traj_path else f"the {name} mission's trajectory")
+    check_connection(args.connect)  # last: it may wait a moment for a host name to resolve
     return FlyRequest(
         connect=args.connect, profile=profile, config=cfg, trajectory=traj, mission_name=name,
         trajectory_path=traj_path, sysid=args.sysid, yes=args.yes, dry_run=args.dry_run,
         wind_ned_mps=tuple(args.wind_ned) if args.wind_ned else None,
-        log_root=args.log_dir or _default_root(), show_panel=console.is_terminal and not args.json,
+        log_root=root, show_panel=console.is_terminal and not args.json,
         confirm=confirm_go, print_fn=(err_console.print if args.json else console.print),
     )  # fmt: skip
-
-
-def _default_root() -> Path:
-    from flighttest.flightlog import default_log_root
-
-    return default_log_root()
 
 
 def confirm_go(pre) -> bool:
@@ -139,7 +179,7 @@ def run_request(req, as_json: bool) -> int:
     out = asyncio.run(fly(req))
     summary = out.summary()
     if as_json:
-        print_json(summary)
+        print_json({**summary, "error": out.abort_reason} if out.outcome == "refused" else summary)
     else:
         colour = {"completed": "green", "dry_run": "green", "probe_stopped": "yellow"}.get(out.outcome, "red")
         line = f"[{colour}]{out.outcome}[/]"
@@ -148,27 +188,46 @@ def run_request(req, as_json: bool) -> int:
         if out.descent_time_s is not None:
             line += f"  (descent {out.descent_time_s:.2f} s)"
         console.print(line)
-        console.print(f"log: {out.log_dir}")
+        if out.log_dir:
+            console.print(f"log: {out.log_dir}")
     if out.outcome == "refused":
-        raise FlighttestError(out.abort_reason or "refused")
+        exc = FlighttestError(out.abort_reason or "refused")
+        exc.json_printed = as_json  # type: ignore[attr-defined]  (stdout already holds the summary)
+        raise exc
     if out.exit_code and not as_json:
         print(f"flighttest: aborted: {out.abort_reason}", file=sys.stderr)
     return out.exit_code
 
 
+def json_failure(exc: FlighttestError, as_json: bool, **extra: Any) -> None:
+    """With ``--json`` stdout is JSON in every outcome: a refusal prints ``{"error", "outcome", ...}``
+    (once; ``json_printed`` tells the CLI's own handler it is done), the error line still goes to stderr."""
+    if as_json and not getattr(exc, "json_printed", False):
+        print_json({"error": str(exc), "outcome": "refused" if exc.exit_code == 2 else "failed", **extra})
+        exc.json_printed = True  # type: ignore[attr-defined]
+
+
 def cmd_fly(args: argparse.Namespace) -> int:
-    return run_request(build_request(args), args.json)
+    try:
+        return run_request(build_request(args), args.json)
+    except FlighttestError as exc:
+        json_failure(exc, args.json)
+        raise
 
 
 def mission_main(mission: str, module: ModuleType, argv: list[str] | None = None) -> int:
-    """Entry point of the scripts in ``missions/``: same options as ``flighttest fly``."""
-    p = argparse.ArgumentParser(prog=f"missions/{MISSIONS[mission]}.py", description=module.__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    """Entry point of the mission scripts (``python vertical_descent.py``): the options of ``flighttest fly``."""
+    from flighttest.inputs import ArgumentParser
+
+    p = ArgumentParser(prog=f"{MISSIONS[mission]}.py", description=module.__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     add_fly_arguments(p, target=False)
-    args = p.parse_args(argv)
-    args.target = mission
+    as_json = "--json" in (sys.argv[1:] if argv is None else argv)
     try:
+        args = p.parse_args(argv)
+        args.target = mission
         return run_request(build_request(args, mission, module), args.json)
     except FlighttestError as exc:
+        json_failure(exc, as_json)
         print(f"flighttest: error: {exc}", file=sys.stderr)
         return exc.exit_code

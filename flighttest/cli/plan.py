@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from pathlib import Path
 from typing import Any
 
 from rich.table import Table
 
+from flighttest import inputs as ip
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
 from flighttest.profiles import VehicleProfile, load_profile
@@ -35,16 +37,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "and the options below.",
     )
     pp.add_argument("--case", type=int, choices=range(1, 7), metavar="N", help="Table II case 1-6")
-    pp.add_argument("--height", type=float, default=5.0, metavar="M", help="descent height (default 5)")
-    pp.add_argument("--y-bound", type=float, metavar="M", help="|Y| bound, m (default 15 or the case's)")
+    pp.add_argument("--height", type=ip.HEIGHT_M, default=5.0, metavar="M", help="descent height (default 5)")
+    pp.add_argument("--y-bound", type=ip.DISTANCE_M, metavar="M", help="|Y| bound, m (default 15 or the case's)")
     pp.add_argument("--y-final", choices=("fixed", "free"), help="final Y fixed at 0 or free within the bound")
-    pp.add_argument("--phi-bound", metavar="DEG", help="roll bound in degrees, or 'free' (flips)")
-    pp.add_argument("--omega-max", type=float, metavar="RPS", help="roll-rate bound, rad/s")
-    pp.add_argument("--f-min", type=float, metavar="MPS2", help="min collective thrust per mass, m/s²")
-    pp.add_argument("--f-max", type=float, metavar="MPS2", help="max collective thrust per mass, m/s²")
-    pp.add_argument("--v-bound", type=float, metavar="MPS", help="speed bound per axis, m/s")
-    pp.add_argument("--wind", nargs=2, type=float, metavar=("WE", "WD"), help="wind east/down, m/s")
-    pp.add_argument("--intervals", type=int, default=80, metavar="N", help="mesh intervals (default 80)")
+    pp.add_argument("--phi-bound", type=_phi_bound, metavar="DEG", help="roll bound in degrees, or 'free' (flips)")
+    pp.add_argument("--omega-max", type=ip.BODY_RATE_RPS, metavar="RPS", help="roll-rate bound, rad/s")
+    pp.add_argument("--f-min", type=ip.ACCEL_MPS2, metavar="MPS2", help="min collective thrust per mass, m/s²")
+    pp.add_argument("--f-max", type=ip.ACCEL_MPS2, metavar="MPS2", help="max collective thrust per mass, m/s²")
+    pp.add_argument("--v-bound", type=ip.SPEED_MPS, metavar="MPS", help="speed bound per axis, m/s")
+    pp.add_argument("--wind", nargs=2, type=ip.WIND_MPS, metavar=("WE", "WD"), help="wind east/down, m/s")
+    pp.add_argument("--intervals", type=ip.INTERVALS, default=80, metavar="N", help="mesh intervals (default 80)")
     _common(pp, kind="planar", constraint=True)
     pp.set_defaults(func=cmd_planar)
 
@@ -54,22 +56,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Rigid body with quaternions; inputs collective thrust and body rates; bounds on radius, "
         "tilt, rates, angular acceleration, thrust (≥ 0) from the vehicle profile.",
     )
-    ph.add_argument("--height", type=float, default=5.0, metavar="M", help="descent height (default 5)")
-    ph.add_argument("--radius", type=float, default=2.0, metavar="M", help="horizontal radius bound (default 2)")
-    ph.add_argument("--end", nargs=2, type=float, metavar=("N", "E"), help="end point (m), default the start XY")
-    ph.add_argument("--tilt-max", type=float, metavar="DEG", help="tilt bound (default the profile's)")
-    ph.add_argument("--rate-max", type=float, metavar="DPS", help="body-rate bound (default the profile's)")
-    ph.add_argument("--thrust-fraction", type=float, default=0.9, help="share of max thrust to plan with (0.9)")
-    ph.add_argument("--wind", nargs=3, type=float, metavar=("WN", "WE", "WD"), help="wind NED, m/s")
-    ph.add_argument("--intervals", type=int, default=60, metavar="N", help="mesh intervals (default 60)")
+    ph.add_argument("--height", type=ip.HEIGHT_M, default=5.0, metavar="M", help="descent height (default 5)")
+    ph.add_argument("--radius", type=ip.DISTANCE_M, default=2.0, metavar="M",
+                    help="horizontal radius bound (default 2)")
+    ph.add_argument("--end", nargs=2, type=ip.POSITION_M, metavar=("N", "E"),
+                    help="end point (m), default the start XY")
+    ph.add_argument("--tilt-max", type=ip.TILT_DEG, metavar="DEG", help="tilt bound (default the profile's)")
+    ph.add_argument("--rate-max", type=ip.BODY_RATE_DPS, metavar="DPS", help="body-rate bound (default the profile's)")
+    ph.add_argument("--thrust-fraction", type=ip.FRACTION, default=0.9, help="share of max thrust to plan with (0.9)")
+    ph.add_argument("--wind", nargs=3, type=ip.WIND_MPS, metavar=("WN", "WE", "WD"), help="wind NED, m/s")
+    ph.add_argument("--intervals", type=ip.INTERVALS, default=60, metavar="N", help="mesh intervals (default 60)")
     _common(ph, kind="helix", constraint=True)
     ph.set_defaults(func=cmd_helix)
 
     pv = psub.add_parser("vertical", help="fastest straight-down descent keeping w ≤ w_allow (closed form)")
-    pv.add_argument("--height", type=float, default=5.0, metavar="M", help="descent height (default 5)")
-    pv.add_argument("--w-allow", type=float, metavar="MPS", help="override the profile's w_allow")
-    pv.add_argument("--margin", type=float, metavar="MPS", help="override the profile's guard margin")
-    pv.add_argument("--accel-fraction", type=float, default=0.8, help="share of the accel limits (0.8)")
+    pv.add_argument("--height", type=ip.HEIGHT_M, default=5.0, metavar="M", help="descent height (default 5)")
+    pv.add_argument("--w-allow", type=ip.W_ALLOW_POSITIVE_MPS, metavar="MPS", help="override the profile's w_allow")
+    pv.add_argument("--margin", type=ip.MARGIN_MPS, metavar="MPS", help="override the profile's guard margin")
+    pv.add_argument("--accel-fraction", type=ip.FRACTION, default=0.8, help="share of the accel limits (0.8)")
     _common(pv, kind="vertical", constraint=False)
     pv.set_defaults(func=cmd_vertical)
 
@@ -79,14 +83,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Descent speed grows slowly; ends at the last whole cycle under the speed cap and duration; "
         "the amplitude must fit above the altitude floor. Output lists when each descent speed is first reached.",
     )
-    pr.add_argument("--amplitude", type=float, default=2.0, metavar="M", help="max depth below start (2)")
-    pr.add_argument("--omega0", type=float, default=0.05, metavar="RPS2", help="chirp rate ω0, rad/s² (0.05)")
-    pr.add_argument("--ramp", type=float, default=3.0, metavar="S", help="ramp-in time (3)")
-    pr.add_argument("--max-descent-speed", type=float, default=3.0, metavar="MPS", help="speed cap (3)")
-    pr.add_argument("--duration", type=float, default=60.0, metavar="S", help="longest duration (60)")
-    pr.add_argument("--start-alt", type=float, default=10.0, metavar="M", help="start altitude AGL (10)")
-    pr.add_argument("--floor", type=float, default=2.0, metavar="M", help="altitude floor AGL (2)")
-    pr.add_argument("--speed-step", type=float, default=0.1, metavar="MPS", help="speed grid step (0.1)")
+    pr.add_argument("--amplitude", type=ip.HEIGHT_M, default=2.0, metavar="M", help="max depth below start (2)")
+    pr.add_argument("--omega0", type=ip.CHIRP_RATE_RPS2, default=0.05, metavar="RPS2",
+                    help="chirp rate ω0, rad/s² (0.05)")
+    pr.add_argument("--ramp", type=ip.DURATION_S, default=3.0, metavar="S", help="ramp-in time (3)")
+    pr.add_argument("--max-descent-speed", type=ip.SPEED_MPS, default=3.0, metavar="MPS", help="speed cap (3)")
+    pr.add_argument("--duration", type=ip.DURATION_S, default=60.0, metavar="S", help="longest duration (60)")
+    pr.add_argument("--start-alt", type=ip.START_HEIGHT_M, default=10.0, metavar="M", help="start altitude AGL (10)")
+    pr.add_argument("--floor", type=ip.ALTITUDE_FLOOR_M, default=2.0, metavar="M", help="altitude floor AGL (2)")
+    pr.add_argument("--speed-step", type=ip.SPEED_STEP_MPS, default=0.1, metavar="MPS", help="speed grid step (0.1)")
     _common(pr, kind="probe", constraint=False)
     pr.set_defaults(func=cmd_probe)
 
@@ -97,30 +102,28 @@ def _common(p: argparse.ArgumentParser, kind: str, constraint: bool) -> None:
         p.add_argument("--constraint", choices=("cone", "guard"),
                        help="pure cone (w_allow = 0, the paper's) or the guard region (profile's w_allow); "
                             "default cone")  # fmt: skip
-        p.add_argument("--margin", type=float, metavar="MPS",
+        p.add_argument("--margin", type=ip.MARGIN_MPS, metavar="MPS",
                        help="margin kept from the boundary (default: the profile's guard margin for vehicle "
                             "plans, 0 for Table II cases)")  # fmt: skip
-    p.add_argument("-o", "--output", type=Path, metavar="PATH", help=f"output stem (default trajectories/{kind}-...)")
+    p.add_argument("-o", "--output", metavar="PATH",
+                   help=f"output stem: writes PATH.csv and PATH.json (default trajectories/{kind}-...)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--plot", type=Path, metavar="PNG", help="write a PNG of path, speeds, attitude and the cone")
+    p.add_argument("--plot", metavar="PNG",
+                   help="write a figure of path, speeds, attitude and the cone (.png, .pdf or .svg)")
     p.add_argument("--verbose", action="store_true", help="show IPOPT's output")
 
 
 # -- helpers -----------------------------------------------------------------------------------------
 
 
-def _finite(name: str, value: float | None, positive: bool = False, non_negative: bool = False) -> None:
-    if value is None:
-        return
-    if not math.isfinite(value) or (positive and value <= 0) or (non_negative and value < 0):
-        need = "a positive number" if positive else "a number ≥ 0" if non_negative else "a finite number"
-        raise FlighttestError(f"--{name} must be {need} (got {value})")
+def _phi_bound(text: str) -> float | str:
+    """``--phi-bound``: degrees in (0, 180], or ``free`` (no roll bound: flips allowed)."""
+    return "free" if text.strip().lower() == "free" else ip.ROLL_BOUND_DEG(text)
 
 
 def _constraint(args: argparse.Namespace, profile: VehicleProfile, paper: bool):
     from flighttest.planner.cone import VelocityConstraint
 
-    _finite("margin", args.margin, non_negative=True)
     kind = args.constraint or "cone"
     margin = args.margin if args.margin is not None else (0.0 if paper else profile.vrs.margin_mps)
     w_allow = profile.w_allow_mps if kind == "guard" else 0.0
@@ -128,14 +131,27 @@ def _constraint(args: argparse.Namespace, profile: VehicleProfile, paper: bool):
 
 
 def _out_path(args: argparse.Namespace, default: str) -> Path:
-    return args.output if args.output is not None else Path("trajectories") / default
+    """The output stem, its two files and the plot checked before anything is solved: a plan that
+    cannot be written is not computed (``-o ''`` or a path under a file is one line, not a traceback)."""
+    from flighttest.trajectory import _paths
+
+    stem = args.output if args.output is not None else str(Path("trajectories") / default)
+    if not str(stem).strip():
+        raise FlighttestError("-o/--output: the path is empty")
+    if str(stem).endswith(("/", os.sep)):
+        raise FlighttestError(f"-o/--output {stem!r}: names a folder; give a file stem such as DIR/descent")
+    for f in _paths(stem):
+        ip.check_output_path(f, "-o/--output")
+    if args.plot is not None:
+        ip.check_output_path(args.plot, "--plot", ip.IMAGE_SUFFIXES)
+    return Path(stem)
 
 
 def _save(traj, args, out: Path) -> Path:
     try:
         csv_path, _ = traj.save(out)
     except OSError as exc:
-        raise FlighttestError(f"cannot write trajectory {out}: {exc.strerror}") from None
+        raise FlighttestError(f"cannot write trajectory {out}: {exc.strerror or exc}") from None
     return csv_path
 
 
@@ -177,7 +193,10 @@ def _plot(args, traj, constraint, wind=(0.0, 0.0, 0.0)) -> str | None:
         return None
     from flighttest.planner.plot import plot_trajectory
 
-    return str(plot_trajectory(traj, args.plot, constraint, wind))
+    try:
+        return str(plot_trajectory(traj, args.plot, constraint, wind))
+    except OSError as exc:
+        raise FlighttestError(f"--plot {args.plot}: cannot write ({exc.strerror or exc})") from None
 
 
 # -- commands ----------------------------------------------------------------------------------------
@@ -191,23 +210,11 @@ def cmd_planar(args: argparse.Namespace) -> int:
     from flighttest.planner.planar import PlanarProblem, solve_planar
 
     profile = load_profile(args.vehicle)
-    for name in ("height", "y_bound", "omega_max", "v_bound"):
-        _finite(name.replace("_", "-"), getattr(args, name), positive=True)
-    for name in ("f_min", "f_max"):
-        _finite(name.replace("_", "-"), getattr(args, name))
-    if args.intervals < 10:
-        raise FlighttestError("--intervals must be at least 10")
+    if args.f_min is not None and args.f_max is not None and args.f_min >= args.f_max:
+        raise FlighttestError(f"--f-min ({args.f_min:g}) must be below --f-max ({args.f_max:g})")
     phi_bound: float | str | None = "unset"
     if args.phi_bound is not None:
-        if args.phi_bound.lower() == "free":
-            phi_bound = None
-        else:
-            try:
-                deg = float(args.phi_bound)
-            except ValueError:
-                raise FlighttestError(f"--phi-bound must be degrees or 'free' (got {args.phi_bound!r})") from None
-            _finite("phi-bound", deg, positive=True)
-            phi_bound = math.radians(deg)
+        phi_bound = None if args.phi_bound == "free" else math.radians(args.phi_bound)
     paper = args.case is not None
     constraint = _constraint(args, profile, paper)
     if paper:
@@ -225,6 +232,7 @@ def cmd_planar(args: argparse.Namespace) -> int:
             v_bound_mps=profile.max_speed_mps,
         )
         default_name = f"planar-{profile.name}-{args.height:g}m"
+    out_stem = _out_path(args, default_name)
     overrides: dict[str, Any] = {"constraint": constraint, "n_intervals": args.intervals,
                                  "n_coarse": max(10, args.intervals // 2)}  # fmt: skip
     for arg, field in (("height", "height_m"), ("y_bound", "y_bound_m"), ("y_final", "y_final"),
@@ -236,8 +244,6 @@ def cmd_planar(args: argparse.Namespace) -> int:
     if phi_bound != "unset":
         overrides["phi_bound_rad"] = phi_bound
     if args.wind:
-        _finite("wind", args.wind[0])
-        _finite("wind", args.wind[1])
         overrides["wind_y_mps"], overrides["wind_z_mps"] = args.wind
     p = replace(p, **overrides)
     p = replace(p, z_bound_m=max(p.z_bound_m, p.height_m))
@@ -250,7 +256,7 @@ def cmd_planar(args: argparse.Namespace) -> int:
     traj = planar_trajectory(sol, profile.name, profile.mass_kg, extra)
     if not paper:
         traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, _out_path(args, default_name))
+    out = _save(traj, args, out_stem)
     plot = _plot(args, traj, p.constraint, (0.0, p.wind_y_mps, p.wind_z_mps))
     man = sol.manoeuvre()
     x = sol.result.x
@@ -299,14 +305,9 @@ def cmd_helix(args: argparse.Namespace) -> int:
     from flighttest.planner.helix import problem_for_vehicle, solve_helix
 
     profile = load_profile(args.vehicle)
-    for name in ("height", "radius", "tilt_max", "rate_max", "thrust_fraction"):
-        _finite(name.replace("_", "-"), getattr(args, name), positive=True)
-    if args.intervals < 10:
-        raise FlighttestError("--intervals must be at least 10")
+    out_stem = _out_path(args, f"helix-{profile.name}-{args.height:g}m-r{args.radius:g}")
     wind = tuple(args.wind) if args.wind else (0.0, 0.0, 0.0)
     end = tuple(args.end) if args.end else (0.0, 0.0)
-    for v in (*wind, *end):
-        _finite("wind/--end", v)
     constraint = _constraint(args, profile, paper=False)
     p = problem_for_vehicle(
         profile,
@@ -326,7 +327,7 @@ def cmd_helix(args: argparse.Namespace) -> int:
         return _failed(args, "helix", sol)
     traj = helix_trajectory(sol, profile.name, profile.mass_kg)
     traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, _out_path(args, f"helix-{profile.name}-{args.height:g}m-r{args.radius:g}"))
+    out = _save(traj, args, out_stem)
     plot = _plot(args, traj, constraint, wind)
     c = sol.check
     data = {
@@ -367,14 +368,11 @@ def cmd_vertical(args: argparse.Namespace) -> int:
     from flighttest.planner.vertical import plan_vertical
 
     profile = load_profile(args.vehicle)
-    _finite("height", args.height, positive=True)
-    _finite("w-allow", args.w_allow, positive=True)
-    _finite("margin", args.margin, non_negative=True)
-    _finite("accel-fraction", args.accel_fraction, positive=True)
+    out_stem = _out_path(args, f"vertical-{profile.name}-{args.height:g}m")
     plan = plan_vertical(profile, args.height, args.w_allow, args.margin, args.accel_fraction)
     traj = vertical_trajectory(plan, profile.name, profile.mass_kg)
     traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, _out_path(args, f"vertical-{profile.name}-{args.height:g}m"))
+    out = _save(traj, args, out_stem)
     w_allow = plan.problem["w_allow_mps"]
     plot = _plot(args, traj, VelocityConstraint(profile.vrs.cone_deg, w_allow, plan.problem["margin_mps"]))
     data = {
@@ -407,13 +405,14 @@ def cmd_probe(args: argparse.Namespace) -> int:
     from flighttest.planner.probe import plan_probe
 
     profile = load_profile(args.vehicle)
+    out_stem = _out_path(args, f"probe-{profile.name}")
     plan = plan_probe(args.amplitude, args.omega0, args.ramp, args.max_descent_speed, args.duration,
                       args.start_alt, args.floor, args.speed_step,
                       max_accel_down_mps2=PROBE_ACCEL_FRACTION * profile.max_accel_down_mps2,
                       max_accel_up_mps2=PROBE_ACCEL_FRACTION * profile.max_accel_up_mps2)  # fmt: skip
     traj = probe_trajectory(plan, profile.name, profile.mass_kg)
     traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, _out_path(args, f"probe-{profile.name}"))
+    out = _save(traj, args, out_stem)
     plot = _plot(args, traj, VelocityConstraint(profile.vrs.cone_deg, profile.w_allow_mps, profile.vrs.margin_mps))
     data = {
         "status": "closed_form",

@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from rich.table import Table
 
 from flighttest import aero
+from flighttest import inputs as ip
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
 from flighttest.frames import validate_quaternion
@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     pc = rsub.add_parser("chart", help="PNG of the normalised velocity space (paper Fig. 5/8)")
     pc.add_argument("--vehicle", required=True, help="profile name or .toml path")
-    pc.add_argument("-o", "--output", default="chart.png", help="PNG to write (default chart.png)")
+    pc.add_argument("-o", "--output", default="chart.png",
+                    help="figure to write: .png, .pdf or .svg (default chart.png)")
     pc.set_defaults(func=cmd_chart)
 
     pk = rsub.add_parser(
@@ -38,13 +39,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     pk.add_argument("--vehicle", required=True, help="profile name or .toml path")
     one = pk.add_argument_group("one state")
-    one.add_argument("--v-ned", nargs=3, type=float, metavar=("VN", "VE", "VD"), help="velocity NED, m/s")
-    one.add_argument("--quat", nargs=4, type=float, metavar=("W", "X", "Y", "Z"), help="attitude body→NED")
-    one.add_argument("--wind-ned", nargs=3, type=float, metavar=("WN", "WE", "WD"), help="wind NED, m/s")
-    pk.add_argument("--csv", type=Path, metavar="FILE", help="many states from a CSV file")
-    pk.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the CSV result here, not stdout")
-    pk.add_argument("--w-allow", type=float, metavar="MPS", help="override the profile's w_allow (m/s)")
-    pk.add_argument("--margin", type=float, metavar="MPS", help="override the profile's guard margin (m/s)")
+    one.add_argument("--v-ned", nargs=3, type=ip.VELOCITY_MPS, metavar=("VN", "VE", "VD"), help="velocity NED, m/s")
+    one.add_argument("--quat", nargs=4, type=ip.QUAT_COMPONENT, metavar=("W", "X", "Y", "Z"), help="attitude body→NED")
+    one.add_argument("--wind-ned", nargs=3, type=ip.VELOCITY_MPS, metavar=("WN", "WE", "WD"), help="wind NED, m/s")
+    pk.add_argument("--csv", metavar="FILE", help="many states from a CSV file")
+    pk.add_argument("-o", "--output", metavar="FILE", help="write the CSV result here, not stdout")
+    pk.add_argument("--w-allow", type=ip.W_ALLOW_MPS, metavar="MPS", help="override the profile's w_allow (m/s)")
+    pk.add_argument("--margin", type=ip.MARGIN_MPS, metavar="MPS", help="override the profile's guard margin (m/s)")
     pk.add_argument("--json", action="store_true", help="machine-readable output")
     pk.set_defaults(func=cmd_check)
 
@@ -53,22 +54,33 @@ def cmd_chart(args: argparse.Namespace) -> int:
     from flighttest.chart import write_chart
 
     profile = load_profile(args.vehicle)
-    out = write_chart(profile, args.output)
+    out = ip.check_output_path(args.output, "-o/--output", ip.IMAGE_SUFFIXES)
+    try:
+        out = write_chart(profile, out)
+    except OSError as exc:
+        raise FlighttestError(f"-o/--output {out}: cannot write ({exc.strerror or exc})") from None
     console.print(f"wrote {out}")
     return 0
 
 
 def _region_for(args: argparse.Namespace):
     profile = load_profile(args.vehicle)
-    for name in ("w_allow", "margin"):
-        value = getattr(args, name)
-        if value is not None and not (math.isfinite(value) and value >= 0):
-            raise FlighttestError(f"--{name.replace('_', '-')} must be a finite number ≥ 0 (got {value})")
     return profile, profile.guard_region(args.w_allow, args.margin)
+
+
+def _finite_result(where: str, *values) -> None:
+    """The guard's test must come out as numbers: a NaN margin would read as neither side."""
+    for v in values:
+        if not np.all(np.isfinite(v)):
+            raise FlighttestError(f"{where}: the state gives a non-finite blade-frame velocity (inputs out of range)")
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     profile, region = _region_for(args)
+    if args.output is not None:
+        if args.csv is None:
+            raise FlighttestError("-o/--output applies to --csv only")
+        ip.check_output_path(args.output, "-o/--output")
     if args.csv is not None:
         if args.v_ned or args.quat or args.wind_ned:
             raise FlighttestError("give either --csv or --v-ned/--quat, not both")
@@ -83,6 +95,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         norm = math.sqrt(sum(c * c for c in args.quat))
         raise FlighttestError(f"--quat must be a unit quaternion (norm {norm:.6g})")
     allowed, w, u, margin = region.check(*args.v_ned, *args.quat, *wind)
+    _finite_result("region check", w, u, margin)
     v_H_n, v_z_n = region.normalised(w, u)
     reg = aero.Region(int(aero.classify_n(v_H_n, v_z_n, profile.vrs.onera_k, profile.vrs.eps_vrs,
                                           profile.vrs.eps_tws, profile.vrs.cone_deg)))
@@ -111,12 +124,12 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def _check_csv(args: argparse.Namespace, profile, region) -> int:
+    path = ip.check_input_file(args.csv, "--csv", ip.MAX_CSV_BYTES)
     try:
-        df = pd.read_csv(args.csv)
-    except FileNotFoundError:
-        raise FlighttestError(f"{args.csv}: no such file") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise FlighttestError(f"{args.csv}: not a readable CSV ({str(exc).splitlines()[0]})") from None
+        df = pd.read_csv(path, encoding="utf-8")
+    except (OSError, ValueError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        why = " ".join(str(exc).split())[:120]
+        raise FlighttestError(f"{args.csv}: not a readable CSV ({why})") from None
     df.columns = [str(c).strip() for c in df.columns]
     missing = [c for c in IN_COLUMNS if c not in df.columns]
     if missing:
@@ -131,7 +144,14 @@ def _check_csv(args: argparse.Namespace, profile, region) -> int:
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raw = df[c].iloc[bad[0]]
-            raise FlighttestError(f"{args.csv}: row {bad[0] + 2}, column '{c}': not a finite number ({raw!r})")
+            raise FlighttestError(f"{args.csv}: row {bad[0] + 2}, column '{c}': not a finite number ({ip.shown(raw)})")
+        rng = ip.QUAT_COMPONENT if c.startswith("q") else ip.VELOCITY_MPS
+        out_of_range = np.flatnonzero(~((values >= rng.lo) & (values <= rng.hi)))
+        if out_of_range.size:
+            i = out_of_range[0]
+            raise FlighttestError(
+                f"{args.csv}: row {i + 2}, column '{c}': must be {rng.describe()} (got {values[i]:g})"
+            )
         arr[c] = values
     ok_q = validate_quaternion(arr["qw"], arr["qx"], arr["qy"], arr["qz"])
     if not ok_q.all():
@@ -139,13 +159,18 @@ def _check_csv(args: argparse.Namespace, profile, region) -> int:
         raise FlighttestError(f"{args.csv}: row {row + 2}: quaternion is not of unit norm")
     wind = [arr[c] for c in WIND_COLUMNS] if partial_wind else [0.0, 0.0, 0.0]
     allowed, w, u, margin = region.check(*(arr[c] for c in IN_COLUMNS), *wind)
+    _finite_result(str(args.csv), w, u, margin)
     out = df.copy()
     out["verdict"] = np.where(allowed, "allowed", "forbidden")
     out["w"] = w
     out["u"] = u
     out["margin"] = margin
     if args.output is not None:
-        out.to_csv(args.output, index=False)
+        try:
+            with ip.atomic_write(args.output) as tmp:
+                out.to_csv(tmp, index=False)
+        except OSError as exc:
+            raise FlighttestError(f"-o/--output {args.output}: cannot write ({exc.strerror or exc})") from None
         if args.json:
             print_json({"path": str(args.output), "n_states": len(out), "n_forbidden": int((~allowed).sum())})
         else:

@@ -3,17 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from rich.table import Table
 
 from flighttest.console import console, print_json
-from flighttest.profiles import list_profiles, load_profile
+from flighttest.profiles import load_profile, scan_profiles
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("vehicle", help="list and show vehicle profiles (v_h, w_allow, cone)")
     vsub = p.add_subparsers(dest="vehicle_command", metavar="ACTION", required=True)
-    pl = vsub.add_parser("list", help="all shipped and user profiles")
+    pl = vsub.add_parser(
+        "list", help="all shipped and user profiles",
+        description="Every profile that loads. A file that does not (malformed, not UTF-8, a bad field) is named "
+        "on stderr, one line each, and skipped: the others are still listed and the exit code stays 0; "
+        "`vehicle show FILE` or any command using that vehicle refuses it with exit code 2.",
+    )
     pl.add_argument("--json", action="store_true", help="machine-readable output")
     pl.set_defaults(func=cmd_list)
     ps = vsub.add_parser("show", help="one profile in full")
@@ -23,7 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    profiles = list_profiles()
+    profiles, problems = scan_profiles()
+    for line in problems:  # one damaged file in a user folder must not hide the good ones
+        print(f"flighttest: warning: skipped {line}", file=sys.stderr)
     if args.json:
         print_json([p.summary() for p in profiles])
         return 0

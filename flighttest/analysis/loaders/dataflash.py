@@ -7,13 +7,23 @@ centidegree attitudes arrive in degrees and ``Lat``/``Lng`` in degrees. What is 
   from the EKF origin. Without them: ``POS`` (``Lat Lng`` → flat-earth metres from the first fix,
   ``RelHomeAlt`` m **up-positive** → ``d_m = −RelHomeAlt``) and the climb rate ``CTUN.CRt``
   (**cm/s, up-positive** → ``vd_mps = −CRt/100``).
-- attitude: ``ATT`` ``Roll Pitch Yaw`` in degrees (ZYX Euler) → quaternion.
+- attitude, the first of: ``ATT`` ``Roll Pitch Yaw`` (degrees, ZYX Euler); ``AHR2`` (the backup
+  DCM attitude: ``Q1..Q4`` where logged, else its Euler angles); ``XKQ`` (EKF3 core 0 ``Q1..Q4``);
+  ``NKQ`` / ``NKQ1`` (EKF2). Logs that leave ATT out (a log-bitmask choice) still have attitude.
 - body rates and specific force: ``IMU`` (first instance) ``GyrX..Z`` rad/s, ``AccX..Z`` m/s², FRD.
 - motors: ``RCOU`` ``C1..C8`` PWM µs → (µs − 1000)/1000; channels never non-zero dropped.
 - mode: ``MODE.ModeNum`` → ArduCopter mode name; armed: ``ARM.ArmState``, else ``EV`` ids 10/11.
 - wind: ``XKF2`` ``VWN VWE`` (m/s, velocity of the air) when present.
+- heights (up-positive m; the position's own first): ``XKF1.PD`` / ``NKF1.PD`` (negated, EKF origin,
+  home-relative), ``POS.RelHomeAlt`` (home-relative) and ``POS.Alt`` (AMSL), ``CTUN.Alt`` (the
+  altitude controller's, home-relative), ``BARO.Alt`` (first barometer, m above its ground
+  calibration; ``CTUN.BAlt`` instead when no BARO records), ``GPS.Alt`` (first receiver, m AMSL, 3D
+  fixes only: ``Status`` ≥ 3), ``RFND.Dist`` (m; ``Dist1`` in older logs; good readings only where
+  ``Stat`` is logged, downward sensors where ``Orient`` is).
+- parameters: ``PARM`` ``Name Value``, the last value of each name.
 
-Times are ``TimeUS`` (µs since boot); the log has no wall clock here, so ``unix_s`` is NaN.
+Times are ``TimeUS`` (µs since boot, also the state's ``boot_s``); the log has no wall clock here,
+so ``unix_s`` is NaN. Multi-instance records (``I``, ``C``, ``Instance``) keep instance 0 only.
 """
 
 from __future__ import annotations
@@ -30,10 +40,13 @@ from pymavlink import mavutil
 
 from flighttest.analysis.schema import (
     FlightLog,
+    HeightSource,
     build_state,
     continuous_quaternions,
     fill_derived,
+    height_source,
     normalise_quaternions,
+    param_value,
     resample,
 )
 from flighttest.errors import FlighttestError
@@ -48,15 +61,28 @@ WANTED = {
     "XKF1": ["TimeUS", "C", "PN", "PE", "PD", "VN", "VE", "VD"],
     "NKF1": ["TimeUS", "PN", "PE", "PD", "VN", "VE", "VD"],
     "XKF2": ["TimeUS", "C", "VWN", "VWE"],
-    "POS": ["TimeUS", "Lat", "Lng", "RelHomeAlt"],
-    "CTUN": ["TimeUS", "CRt"],
+    "POS": ["TimeUS", "Lat", "Lng", "Alt", "RelHomeAlt"],
+    "CTUN": ["TimeUS", "CRt", "Alt", "BAlt"],
     "ATT": ["TimeUS", "Roll", "Pitch", "Yaw"],
+    "AHR2": ["TimeUS", "Roll", "Pitch", "Yaw", "Q1", "Q2", "Q3", "Q4"],
+    "XKQ": ["TimeUS", "C", "Q1", "Q2", "Q3", "Q4"],
+    "NKQ": ["TimeUS", "C", "Q1", "Q2", "Q3", "Q4"],
+    "NKQ1": ["TimeUS", "Q1", "Q2", "Q3", "Q4"],
     "IMU": ["TimeUS", "I", "GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
     "RCOU": ["TimeUS", "C1", "C2", "C3", "C4", "C5", "C6", "C7", "C8"],
     "MODE": ["TimeUS", "ModeNum"],
     "ARM": ["TimeUS", "ArmState"],
     "EV": ["TimeUS", "Id"],
+    "BARO": ["TimeUS", "I", "Alt"],
+    "GPS": ["TimeUS", "I", "Status", "Alt"],
+    "RFND": ["TimeUS", "Instance", "Dist", "Dist1", "Stat", "Orient"],
 }
+INSTANCE_FIELDS = ("I", "C", "Instance")
+ATTITUDE_RECORDS = ("ATT", "AHR2", "XKQ", "NKQ", "NKQ1")  # in order of preference
+PARM = "PARM"
+GPS_OK_FIX_3D = 3
+RANGEFINDER_GOOD = 4  # RangeFinder::Status::Good
+ROTATION_PITCH_270 = 25  # downward
 
 
 @contextlib.contextmanager
@@ -77,40 +103,123 @@ def _quiet_fds():
                 os.close(fd)
 
 
-def _read(path: Path) -> tuple[dict[str, dict[str, np.ndarray]], str]:
+def _record_counts(df) -> dict[str, int] | None:
+    """Records per type from the binary reader's index (None for a text log: no index)."""
+    counts, names = getattr(df, "counts", None), getattr(df, "id_to_name", None)
+    if not isinstance(counts, list) or not isinstance(names, dict):
+        return None
+    return {names[i]: c for i, c in enumerate(counts) if c and i in names}
+
+
+def _types_to_read(counts: dict[str, int] | None) -> list[str]:
+    """The record types worth decoding: of the fallbacks (EKF2 after EKF3, the attitude records)
+    only the one that will be used, since decoding is most of the time spent."""
+    types = [*WANTED, PARM]
+    if counts is None:
+        return types
+    att = next((k for k in ATTITUDE_RECORDS if counts.get(k, 0) >= 2), None)
+    return [
+        k
+        for k in types
+        if k in counts and (k not in ATTITUDE_RECORDS or k == att) and not (k == "NKF1" and counts.get("XKF1", 0) >= 2)
+    ]
+
+
+def _read(path: Path) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float], str]:
     rows: dict[str, dict[str, list]] = {k: {f: [] for f in v} for k, v in WANTED.items()}
+    instance = {k: next((f for f in v if f in INSTANCE_FIELDS), None) for k, v in WANTED.items()}
+    params: dict[str, float] = {}
     chatter = io.StringIO()
     try:
         with _quiet_fds(), contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter):
             df = mavutil.mavlink_connection(str(path))
-            while (m := df.recv_match(type=list(WANTED))) is not None:
+            types = _types_to_read(_record_counts(df))
+            while (m := df.recv_match(type=types)) is not None:
                 name = m.get_type()
-                fields = WANTED[name]
                 d = m.to_dict()
-                if fields[1] in ("I", "C") and d.get(fields[1], 0) != 0:
-                    continue  # first IMU / first EKF core only
-                for f in fields:
-                    rows[name][f].append(d.get(f, np.nan))
+                if name == PARM:
+                    if isinstance(d.get("Name"), str) and isinstance(d.get("Value"), int | float):
+                        params[d["Name"]] = param_value(d["Value"])
+                    continue
+                inst = instance[name]
+                if inst is not None and d.get(inst, 0) != 0:
+                    continue  # first IMU / EKF core / barometer / GPS / rangefinder only
+                for f, col in rows[name].items():
+                    col.append(d.get(f, np.nan))
     except Exception as exc:
         raise FlighttestError(f"{path}: cannot parse DataFlash log ({type(exc).__name__}: {exc})") from None
     out = {k: {f: np.asarray(v, dtype=float) for f, v in cols.items()} for k, cols in rows.items() if cols["TimeUS"]}
-    return out, chatter.getvalue()
+    return out, dict(sorted(params.items())), chatter.getvalue()
+
+
+def _attitude(msgs: dict[str, dict[str, np.ndarray]]) -> tuple[str, np.ndarray, np.ndarray] | None:
+    """(record name, time s, quaternions w x y z) of the first attitude record the log has."""
+
+    def quats(r: dict[str, np.ndarray]) -> np.ndarray | None:
+        if "Q1" not in r:
+            return None
+        q = np.column_stack([r[f"Q{i}"] for i in range(1, 5)])
+        n = np.linalg.norm(q, axis=1)
+        return q if np.all(np.isfinite(q)) and np.all(np.abs(n - 1) < 0.1) else None
+
+    for name in ATTITUDE_RECORDS:
+        if (r := msgs.get(name)) is None or len(r["TimeUS"]) < 2:
+            continue
+        q = quats(r)
+        if q is None and "Roll" in r:
+            q = quat_from_euler(*(np.radians(r[k]) for k in ("Roll", "Pitch", "Yaw")))
+        if q is not None:
+            return name, r["TimeUS"] / 1e6, q
+    return None
+
+
+def _heights(msgs: dict[str, dict[str, np.ndarray]], first: str, origin_s: float) -> list[HeightSource]:
+    """Every height record of the log, the position's own (``first``) leading; see module docstring."""
+    out: list[HeightSource | None] = []
+
+    def add(rec: str, field: str, kind: str, alt_m: np.ndarray | None = None, keep=None, home: bool = False):
+        r = msgs.get(rec)
+        if r is None or field not in r:
+            return
+        alt = r[field] if alt_m is None else alt_m
+        sel = np.ones(len(alt), bool) if keep is None else keep
+        out.append(height_source(f"{rec}.{field}", kind, r["TimeUS"][sel] / 1e6, alt[sel], origin_s, home))
+
+    if first != "POS":
+        add(first, "PD", "estimator", -msgs[first]["PD"], home=True)
+    add("POS", "RelHomeAlt", "estimator", home=True)
+    add("POS", "Alt", "estimator")
+    add("CTUN", "Alt", "estimator", home=True)
+    if "BARO" in msgs:
+        add("BARO", "Alt", "baro")
+    else:
+        add("CTUN", "BAlt", "baro")
+    if (g := msgs.get("GPS")) is not None:
+        add("GPS", "Alt", "gps", keep=(g["Status"] >= GPS_OK_FIX_3D) | np.isnan(g["Status"]))
+    if (rf := msgs.get("RFND")) is not None:
+        field = "Dist" if np.isfinite(rf["Dist"]).any() else "Dist1"
+        keep = (rf["Stat"] == RANGEFINDER_GOOD) | np.isnan(rf["Stat"])  # NaN: not logged
+        keep &= (rf["Orient"] == ROTATION_PITCH_270) | np.isnan(rf["Orient"])
+        add("RFND", field, "rangefinder", keep=keep & (rf[field] > 0))
+    return [h for h in out if h is not None]
 
 
 def load_dataflash(path: Path) -> FlightLog:
     with open(path, "rb") as fh:
         if fh.read(2) != DF_MAGIC:
             raise FlighttestError(f"{path}: not an ArduPilot DataFlash log (bad header)")
-    msgs, chatter = _read(path)
+    msgs, params, chatter = _read(path)
     if not msgs:
         raise FlighttestError(f"{path}: DataFlash log has no readable records (truncated or corrupt)")
     notes = ["DataFlash reader: " + line for line in chatter.splitlines()[:3] if line.strip()]
-    ekf = msgs.get("XKF1") or msgs.get("NKF1")
+    ekf_name = next((k for k in ("XKF1", "NKF1") if k in msgs and len(msgs[k]["TimeUS"]) >= 2), None)
     cols: dict[str, np.ndarray] = {}
-    if ekf is not None and len(ekf["TimeUS"]) >= 2:
+    if ekf_name is not None:
+        ekf = msgs[ekf_name]
         t = ekf["TimeUS"] / 1e6
         cols.update(n_m=ekf["PN"], e_m=ekf["PE"], d_m=ekf["PD"], vn_mps=ekf["VN"], ve_mps=ekf["VE"], vd_mps=ekf["VD"])
     elif (pos := msgs.get("POS")) is not None and len(pos["TimeUS"]) >= 2:
+        ekf_name = "POS"
         t = pos["TimeUS"] / 1e6
         lat, lon = pos["Lat"], pos["Lng"]
         cols.update(
@@ -126,10 +235,12 @@ def load_dataflash(path: Path) -> FlightLog:
         notes.append("position from POS (no EKF XKF1/NKF1 records); north/east velocity differentiated")
     else:
         raise FlighttestError(f"{path}: log has no position (XKF1, NKF1 or POS records)")
+    cols["boot_s"] = t
 
-    if (att := msgs.get("ATT")) is not None:
-        q = quat_from_euler(*(np.radians(att[k]) for k in ("Roll", "Pitch", "Yaw")))
-        qi = normalise_quaternions(resample(att["TimeUS"] / 1e6, continuous_quaternions(q), t, MAX_GAP_S))
+    attitude = _attitude(msgs)
+    if attitude is not None:
+        _, att_t, q = attitude
+        qi = normalise_quaternions(resample(att_t, continuous_quaternions(q), t, MAX_GAP_S))
         cols.update(qw=qi[:, 0], qx=qi[:, 1], qy=qi[:, 2], qz=qi[:, 3])
     if (imu := msgs.get("IMU")) is not None:
         ti = imu["TimeUS"] / 1e6
@@ -162,4 +273,14 @@ def load_dataflash(path: Path) -> FlightLog:
         cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
     missing: dict[str, str] = {}
     state = fill_derived(build_state(t, None, cols), missing)
-    return FlightLog(path=Path(path), source="dataflash", state=state, missing=missing, notes=notes)
+    return FlightLog(
+        path=Path(path),
+        source="dataflash",
+        state=state,
+        missing=missing,
+        notes=notes,
+        heights=_heights(msgs, ekf_name, state.attrs["t_origin_s"]),
+        attitude_source=None if attitude is None else attitude[0],
+        params=params,
+        params_source="dataflash PARM" if params else None,
+    )

@@ -5,6 +5,10 @@ are put on the state clock through their ``unix_s`` column (the tlog's wall cloc
 ``meta.json``, ``events.jsonl``, ``summary.json`` and the flown ``trajectory.json`` are kept as the
 log's metadata (mission, vehicle, trajectory kind). A folder still being written, or one whose
 process was killed, loads with what is there: unreadable side files become notes.
+
+Height sources and the attitude source are the tlog's. Parameters, the first that has any:
+``params.json`` (``{"params": {name: value}, ...}``, the snapshot read at preflight), the
+``"params"`` of ``preflight.json`` (the few the preflight checks read), the tlog's ``PARAM_VALUE``.
 """
 
 from __future__ import annotations
@@ -56,6 +60,18 @@ def _csv(path: Path, notes: list[str], unix0: float, start_unix: float | None) -
     return df
 
 
+def _params(path: Path, log: FlightLog, notes: list[str]) -> tuple[dict[str, float], str | None]:
+    for name in ("params.json", "preflight.json"):
+        raw = _json(path / name, notes).get("params")
+        if isinstance(raw, dict):
+            params = {
+                str(k): float(v) for k, v in raw.items() if isinstance(v, int | float) and not isinstance(v, bool)
+            }
+            if params:
+                return dict(sorted(params.items())), name
+    return log.params, log.params_source
+
+
 def load_folder(path: Path) -> FlightLog:
     notes: list[str] = []
     tlog = path / TLOG_NAME
@@ -74,6 +90,7 @@ def load_folder(path: Path) -> FlightLog:
     start = float(start) if isinstance(start, int | float) else None
     setpoints = _csv(path / "setpoints.csv", notes, unix0, start)
     guard = _csv(path / "guard.csv", notes, unix0, start)
+    params, params_source = _params(path, log, notes)
     events: list[dict] = []
     ev_path = path / "events.jsonl"
     if ev_path.is_file():
@@ -96,4 +113,8 @@ def load_folder(path: Path) -> FlightLog:
         meta=meta,
         missing=log.missing,
         notes=log.notes + notes,
+        heights=log.heights,
+        attitude_source=log.attitude_source,
+        params=params,
+        params_source=params_source,
     )

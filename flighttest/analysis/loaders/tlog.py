@@ -16,10 +16,35 @@ Streams used, in order of preference (all MAVLink common, so PX4 and ArduPilot a
 - wind: ``WIND_COV`` (NED m/s), else ArduPilot's ``WIND`` (direction the wind comes *from*, deg,
   speed m/s → air velocity ``−speed·(cos, sin)``; its ``speed_z`` sign is undocumented, so wd = 0).
 
+Height sources (``FlightLog.heights``, each at its own rate; up-positive metres):
+
+- the position stream's own height first: ``LOCAL_POSITION_NED.z`` / ``ODOMETRY.z`` (negated; EKF
+  origin, home-relative) or ``GLOBAL_POSITION_INT.relative_alt`` (mm above home);
+- ``GLOBAL_POSITION_INT.relative_alt`` also when the local stream is the position (the same
+  estimator, as the GCS shows it);
+- ``ALTITUDE.altitude_monotonic`` (baro): MAVLink defines it as the uncorrected barometric altitude,
+  never reset (PX4 sends ``vehicle_air_data.baro_alt_meter``). Its other fields repeat streams read
+  already (``altitude_local`` = −``LOCAL_POSITION_NED.z``, ``altitude_relative`` = ``relative_alt``,
+  ``altitude_amsl`` = ``GLOBAL_POSITION_INT.alt``), so they are not added again;
+- ``SCALED_PRESSURE.press_abs`` / ``SCALED_PRESSURE2.press_abs`` (baro, hPa → ISA pressure altitude,
+  see :func:`~flighttest.analysis.schema.pressure_altitude_m`; not home-relative);
+- ``GPS_RAW_INT.alt`` (gps, mm above MSL, 3D fixes only: ``fix_type`` ≥ 3);
+- ``DISTANCE_SENSOR.current_distance`` (rangefinder, cm; downward sensors only, orientation 25 =
+  ``MAV_SENSOR_ROTATION_PITCH_270``, readings at or beyond ``min_distance``/``max_distance`` dropped).
+
+``VFR_HUD.alt`` is not used: PX4 sends the AMSL estimate (the MAVLink definition), ArduCopter 3.x
+sent the height above home — a loader cannot tell which, and either repeats an estimator stream.
+
+Parameters: ``PARAM_VALUE`` (last value per ``param_id``). PX4 packs integer parameters byte-wise
+into the float (``MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE``: an INT32 1 arrives as the float
+1.4e-45), ArduPilot casts them (1 arrives as 1.0); the vehicle's HEARTBEAT autopilot says which.
+
 Each stream carries the autopilot's own clock (``time_boot_ms``/``time_usec``); it is mapped to UNIX
 time with the median offset to the tlog's receive stamps, so radio jitter does not enter the
-analysis. The position stream defines the sample instants; every other stream, at its own rate,
-is interpolated onto them (last value for mode/armed; NaN across gaps longer than ``MAX_GAP_S``).
+analysis. Streams on the same boot clock share the position stream's offset (a 1 Hz stream's own
+median would carry its own latency). The position stream defines the sample instants and its boot
+clock is the state's ``boot_s``; every other stream, at its own rate, is interpolated onto them
+(last value for mode/armed; NaN across gaps longer than ``MAX_GAP_S``).
 """
 
 from __future__ import annotations
@@ -33,10 +58,14 @@ from pymavlink import mavutil
 from flighttest.analysis.loaders.mavlink_frames import Decoded, decode, dialect, read_frames
 from flighttest.analysis.schema import (
     FlightLog,
+    HeightSource,
     build_state,
     continuous_quaternions,
     fill_derived,
+    height_source,
     normalise_quaternions,
+    param_value,
+    pressure_altitude_m,
     resample,
     stream_rate_hz,
 )
@@ -47,26 +76,116 @@ MAX_GAP_S = 1.0
 EARTH_RADIUS_M = 6_378_137.0
 MAV_FRAME_BODY_FRD = 12
 MAV_TYPE_GCS = 6
+MAV_SENSOR_ROTATION_PITCH_270 = 25  # a downward-facing distance sensor
+GPS_FIX_TYPE_3D = 3
+BOOT_CLOCK_MAX_S = 1e9  # a "boot" clock beyond ~31 years is UNIX time
+# MAV_PARAM_TYPE → how PX4 packs it byte-wise into the float (numpy dtype of the low bytes)
+PARAM_BYTEWISE = {1: "<u1", 2: "<i1", 3: "<u2", 4: "<i2", 5: "<u4", 6: "<i4"}
 
 
-def _clock_s(d: Decoded, field: str, scale: float) -> np.ndarray:
-    """UNIX seconds of each message from its autopilot timestamp (falls back to receive time)."""
-    recv_s = d.recv_us / 1e6
-    if field not in d.fields.dtype.names:
-        return recv_s
-    own = d.fields[field].astype(float) * scale
-    if len(own) < 2 or not np.all(np.diff(own) >= 0) or own[-1] <= own[0]:
-        return recv_s
-    return own + np.median(recv_s - own)
-
-
-def _time(d: Decoded) -> np.ndarray:
+def _own_clock_s(d: Decoded) -> np.ndarray | None:
+    """The autopilot's boot clock of each message, s; None when the stream has none usable (absent,
+    zero, running backwards across a reboot, or UNIX time rather than time since boot)."""
     names = d.fields.dtype.names
-    if "time_boot_ms" in names:
-        return _clock_s(d, "time_boot_ms", 1e-3)
-    if "time_usec" in names:
-        return _clock_s(d, "time_usec", 1e-6)
-    return d.recv_us / 1e6
+    for field, scale in (("time_boot_ms", 1e-3), ("time_usec", 1e-6)):
+        if field in names:
+            own = d.fields[field].astype(float) * scale
+            if len(own) < 2 or not np.all(np.diff(own) >= 0) or own[-1] <= own[0] or own[-1] > BOOT_CLOCK_MAX_S:
+                return None
+            return own
+    return None
+
+
+def _time(d: Decoded, ref_offset_s: float | None = None) -> np.ndarray:
+    """UNIX seconds of each message from its autopilot timestamp (falls back to receive time).
+
+    ``ref_offset_s``: the boot → UNIX offset of the position stream; used when this stream's own
+    median offset is within a second of it (the same clock)."""
+    recv_s = d.recv_us / 1e6
+    own = _own_clock_s(d)
+    if own is None:
+        return recv_s
+    offset = float(np.median(recv_s - own))
+    if ref_offset_s is not None and abs(offset - ref_offset_s) < 1.0:
+        offset = ref_offset_s
+    return own + offset
+
+
+STREAMS = (
+    "LOCAL_POSITION_NED",
+    "ODOMETRY",
+    "GLOBAL_POSITION_INT",
+    "ATTITUDE_QUATERNION",
+    "ATTITUDE",
+    "HIGHRES_IMU",
+    "SCALED_IMU",
+    "ACTUATOR_OUTPUT_STATUS",
+    "SERVO_OUTPUT_RAW",
+    "HEARTBEAT",
+    "WIND_COV",
+    "WIND",
+    "ALTITUDE",
+    "SCALED_PRESSURE",
+    "SCALED_PRESSURE2",
+    "GPS_RAW_INT",
+    "DISTANCE_SENSOR",
+    "PARAM_VALUE",
+)
+
+
+def _heights(dec: dict[str, Decoded | None], first: str, when, origin_s: float) -> list[HeightSource]:
+    """Every height stream of the log, ``first`` (the position stream's) leading; see module docstring."""
+    out: list[HeightSource | None] = []
+    add = out.append
+    if first != "GLOBAL_POSITION_INT":
+        d = dec[first]
+        add(height_source(f"{first}.z", "estimator", when(d), -d.fields["z"].astype(float), origin_s, True))
+    if (d := dec["GLOBAL_POSITION_INT"]) is not None:
+        alt_m = d.fields["relative_alt"] / 1000.0
+        add(height_source("GLOBAL_POSITION_INT.relative_alt", "estimator", when(d), alt_m, origin_s, True))
+    if (d := dec["ALTITUDE"]) is not None:
+        add(height_source("ALTITUDE.altitude_monotonic", "baro", when(d), d.fields["altitude_monotonic"], origin_s))
+    for name in ("SCALED_PRESSURE", "SCALED_PRESSURE2"):
+        if (d := dec[name]) is not None:
+            p_pa = d.fields["press_abs"].astype(float) * 100.0
+            p_pa[p_pa <= 0] = np.nan
+            add(height_source(f"{name}.press_abs", "baro", when(d), pressure_altitude_m(p_pa), origin_s))
+    if (d := dec["GPS_RAW_INT"]) is not None:
+        fix = d.fields["fix_type"] >= GPS_FIX_TYPE_3D
+        add(height_source("GPS_RAW_INT.alt", "gps", when(d)[fix], d.fields["alt"][fix] / 1000.0, origin_s))
+    if (d := dec["DISTANCE_SENSOR"]) is not None:
+        f = d.fields
+        down = f["orientation"] == MAV_SENSOR_ROTATION_PITCH_270
+        if down.any():
+            sensor = np.bincount(f["id"][down]).argmax()  # one sensor: the downward one reporting most
+            cur = f["current_distance"]
+            ok = down & (f["id"] == sensor) & (cur > f["min_distance"]) & (cur < f["max_distance"])
+            add(
+                height_source("DISTANCE_SENSOR.current_distance", "rangefinder", when(d)[ok], cur[ok] / 100.0, origin_s)
+            )
+    return [h for h in out if h is not None]
+
+
+def _params(pv: Decoded | None, bytewise: bool) -> dict[str, float]:
+    """Last ``PARAM_VALUE`` per name (vectorised; the Python loop runs once per parameter)."""
+    if pv is None:
+        return {}
+    f = pv.fields
+    value = f["param_value"].astype("<f4")
+    ids = np.char.decode(f["param_id"], "ascii", "replace")
+    rev = slice(None, None, -1)
+    names, last = np.unique(ids[rev], return_index=True)
+    idx = len(ids) - 1 - last
+    out: dict[str, float] = {}
+    for name, i in zip(names, idx):
+        if not name:
+            continue
+        code = PARAM_BYTEWISE.get(int(f["param_type"][i])) if bytewise else None
+        if code is not None:  # the integer sits in the float's low bytes (little-endian)
+            out[str(name)] = float(np.frombuffer(value[i : i + 1].tobytes()[: np.dtype(code).itemsize], code)[0])
+        else:
+            out[str(name)] = param_value(float(value[i]))
+    return out
 
 
 def load_tlog(path: Path) -> FlightLog:
@@ -91,23 +210,7 @@ def load_tlog(path: Path) -> FlightLog:
             f"{path}: log has no position stream (LOCAL_POSITION_NED, ODOMETRY or GLOBAL_POSITION_INT)"
         )
     sysid = int(np.bincount(candidates).argmax())
-    dec = {
-        name: decode(frames, name, sysid)
-        for name in (
-            "LOCAL_POSITION_NED",
-            "ODOMETRY",
-            "GLOBAL_POSITION_INT",
-            "ATTITUDE_QUATERNION",
-            "ATTITUDE",
-            "HIGHRES_IMU",
-            "SCALED_IMU",
-            "ACTUATOR_OUTPUT_STATUS",
-            "SERVO_OUTPUT_RAW",
-            "HEARTBEAT",
-            "WIND_COV",
-            "WIND",
-        )
-    }
+    dec = {name: decode(frames, name, sysid) for name in STREAMS}
     crc_errors = sum(d.crc_errors for d in dec.values() if d is not None)
     if crc_errors:
         notes.append(f"{crc_errors} message(s) with a bad CRC skipped")
@@ -115,11 +218,11 @@ def load_tlog(path: Path) -> FlightLog:
     cols: dict[str, np.ndarray] = {}
     odo = dec["ODOMETRY"]
     if (lp := dec["LOCAL_POSITION_NED"]) is not None and len(lp.fields) >= 2:
-        t = _time(lp)
+        pos, pos_name = lp, "LOCAL_POSITION_NED"
         f = lp.fields
         cols.update(n_m=f["x"], e_m=f["y"], d_m=f["z"], vn_mps=f["vx"], ve_mps=f["vy"], vd_mps=f["vz"])
     elif odo is not None and len(odo.fields) >= 2:
-        t = _time(odo)
+        pos, pos_name = odo, "ODOMETRY"
         f = odo.fields
         q = f["q"].astype(float)
         vel = np.column_stack([f["vx"], f["vy"], f["vz"]]).astype(float)
@@ -128,7 +231,7 @@ def load_tlog(path: Path) -> FlightLog:
         vel = np.where(body[:, None], np.column_stack([vn, ve, vd]), vel)
         cols.update(n_m=f["x"], e_m=f["y"], d_m=f["z"], vn_mps=vel[:, 0], ve_mps=vel[:, 1], vd_mps=vel[:, 2])
     elif (gp := dec["GLOBAL_POSITION_INT"]) is not None and len(gp.fields) >= 2:
-        t = _time(gp)
+        pos, pos_name = gp, "GLOBAL_POSITION_INT"
         f = gp.fields
         lat, lon = f["lat"] * 1e-7, f["lon"] * 1e-7
         cols.update(
@@ -144,19 +247,32 @@ def load_tlog(path: Path) -> FlightLog:
         raise FlighttestError(
             f"{path}: log has no position stream (LOCAL_POSITION_NED, ODOMETRY or GLOBAL_POSITION_INT)"
         )
+    boot = _own_clock_s(pos)
+    ref_offset = None if boot is None else float(np.median(pos.recv_us / 1e6 - boot))
 
+    def when(d: Decoded) -> np.ndarray:
+        return _time(d, ref_offset)
+
+    t = when(pos)
+    if boot is not None:
+        cols["boot_s"] = boot
+
+    attitude_source = None
     if (aq := dec["ATTITUDE_QUATERNION"]) is not None:
         f = aq.fields
         q = np.column_stack([f["q1"], f["q2"], f["q3"], f["q4"]])
-        att_t, rates = _time(aq), np.column_stack([f["rollspeed"], f["pitchspeed"], f["yawspeed"]])
+        att_t, rates = when(aq), np.column_stack([f["rollspeed"], f["pitchspeed"], f["yawspeed"]])
+        attitude_source = "ATTITUDE_QUATERNION"
     elif odo is not None:
         f = odo.fields
-        q, att_t = f["q"], _time(odo)
+        q, att_t = f["q"], when(odo)
         rates = np.column_stack([f["rollspeed"], f["pitchspeed"], f["yawspeed"]])
+        attitude_source = "ODOMETRY"
     elif (at := dec["ATTITUDE"]) is not None:
         f = at.fields
         q = quat_from_euler(f["roll"].astype(float), f["pitch"].astype(float), f["yaw"].astype(float))
-        att_t, rates = _time(at), np.column_stack([f["rollspeed"], f["pitchspeed"], f["yawspeed"]])
+        att_t, rates = when(at), np.column_stack([f["rollspeed"], f["pitchspeed"], f["yawspeed"]])
+        attitude_source = "ATTITUDE"
     else:
         q = None
     if q is not None:
@@ -169,24 +285,24 @@ def load_tlog(path: Path) -> FlightLog:
     if (imu := dec["HIGHRES_IMU"]) is not None:
         f = imu.fields
         acc = np.column_stack([f["xacc"], f["yacc"], f["zacc"]]).astype(float)
-        ai = resample(_time(imu), acc, t, MAX_GAP_S)
+        ai = resample(when(imu), acc, t, MAX_GAP_S)
     elif (imu := dec["SCALED_IMU"]) is not None:
         f = imu.fields
         acc = np.column_stack([f["xacc"], f["yacc"], f["zacc"]]).astype(float) * 9.80665e-3
-        ai = resample(_time(imu), acc, t, MAX_GAP_S)
+        ai = resample(when(imu), acc, t, MAX_GAP_S)
     else:
         ai = None
-    imu_fast = imu is None or stream_rate_hz(_time(imu)) >= 0.5 * stream_rate_hz(t)
+    imu_fast = imu is None or stream_rate_hz(when(imu)) >= 0.5 * stream_rate_hz(t)
     if ai is not None:
         cols.update(ax_mps2=ai[:, 0], ay_mps2=ai[:, 1], az_mps2=ai[:, 2])
 
     motors, motor_t = None, None
     if (ao := dec["ACTUATOR_OUTPUT_STATUS"]) is not None:
-        motors, motor_t = ao.fields["actuator"].astype(float), _time(ao)
+        motors, motor_t = ao.fields["actuator"].astype(float), when(ao)
     elif (so := dec["SERVO_OUTPUT_RAW"]) is not None:
         names = [f"servo{i}_raw" for i in range(1, 17)]
         motors = np.column_stack([so.fields[n] for n in names]).astype(float)
-        motor_t = _time(so)
+        motor_t = when(so)
     if motors is not None:
         used = np.flatnonzero(np.any(motors != 0, axis=0))[:8]
         m = motors[:, used]
@@ -195,11 +311,13 @@ def load_tlog(path: Path) -> FlightLog:
         for k in range(mi.shape[1]):
             cols[f"motor_{k}"] = mi[:, k]
 
+    autopilot = None
     if (hb := dec["HEARTBEAT"]) is not None:
         f = hb.fields
         keep = f["type"] != MAV_TYPE_GCS
         if keep.any():
             f, hb_t = f[keep], hb.recv_us[keep] / 1e6
+            autopilot = int(np.bincount(f["autopilot"]).argmax())
             keys = np.stack([f["autopilot"], f["type"], f["base_mode"], f["custom_mode"]], axis=1).astype(np.int64)
             uniq, inv = np.unique(keys, axis=0, return_inverse=True)
             names = np.array(
@@ -223,7 +341,7 @@ def load_tlog(path: Path) -> FlightLog:
 
     if (wc := dec["WIND_COV"]) is not None:
         f = wc.fields
-        wi = resample(_time(wc), np.column_stack([f["wind_x"], f["wind_y"], f["wind_z"]]), t, 5.0)
+        wi = resample(when(wc), np.column_stack([f["wind_x"], f["wind_y"], f["wind_z"]]), t, 5.0)
         cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
     elif (wd := dec["WIND"]) is not None:
         f = wd.fields
@@ -234,4 +352,15 @@ def load_tlog(path: Path) -> FlightLog:
 
     missing: dict[str, str] = {}
     state = fill_derived(build_state(t, t, cols), missing, imu_fast)
-    return FlightLog(path=Path(path), source="tlog", state=state, missing=missing, notes=notes)
+    params = _params(dec["PARAM_VALUE"], bytewise=autopilot == dialect.MAV_AUTOPILOT_PX4)
+    return FlightLog(
+        path=Path(path),
+        source="tlog",
+        state=state,
+        missing=missing,
+        notes=notes,
+        heights=_heights(dec, pos_name, when, state.attrs["t_origin_s"]),
+        attitude_source=attitude_source,
+        params=params,
+        params_source="tlog PARAM_VALUE" if params else None,
+    )

@@ -11,7 +11,17 @@ PX4 topics used (each at its own rate, µs since boot):
 - ``wind`` / ``wind_estimate``: ``windspeed_north/east`` (m/s; vertical wind 0);
 - ``vehicle_local_position_setpoint`` / ``trajectory_setpoint``: the setpoints table.
 
-The data carry only the boot clock, so ``unix_s`` is NaN.
+Height sources (up-positive m): ``vehicle_local_position.z`` (negated; the EKF origin, home-relative)
+first, ``vehicle_global_position.alt`` (the same estimator, m AMSL), ``vehicle_air_data.baro_alt_meter``
+(baro; else ``sensor_baro.pressure`` Pa → ISA pressure altitude), ``vehicle_gps_position`` (else
+``sensor_gps``) ``altitude_msl_m`` (m; older PX4: ``alt``, int mm) for 3D fixes (``fix_type`` ≥ 3),
+and ``distance_sensor.current_distance`` (m; downward sensors, orientation 25, readings strictly
+inside ``min_distance``..``max_distance``). Instance 0 of every topic.
+
+Parameters: the log's initial parameter set (``ulog.initial_parameters``; changes logged later in
+flight are not applied).
+
+The data carry only the boot clock (the state's ``boot_s``), so ``unix_s`` is NaN.
 """
 
 from __future__ import annotations
@@ -23,10 +33,14 @@ import pandas as pd
 
 from flighttest.analysis.schema import (
     FlightLog,
+    HeightSource,
     build_state,
     continuous_quaternions,
     fill_derived,
+    height_source,
     normalise_quaternions,
+    param_value,
+    pressure_altitude_m,
     resample,
 )
 from flighttest.errors import FlighttestError
@@ -66,7 +80,15 @@ TOPICS = [
     "wind_estimate",
     "vehicle_local_position_setpoint",
     "trajectory_setpoint",
+    "vehicle_global_position",
+    "vehicle_air_data",
+    "sensor_baro",
+    "vehicle_gps_position",
+    "sensor_gps",
+    "distance_sensor",
 ]
+GPS_FIX_3D = 3
+ROTATION_DOWNWARD_FACING = 25
 
 
 def _topic(ulog, name: str) -> dict[str, np.ndarray] | None:
@@ -81,6 +103,46 @@ def _cols(d: dict[str, np.ndarray], base: str, n: int) -> np.ndarray | None:
     if not all(k in d for k in names):
         return None
     return np.column_stack([d[k] for k in names]).astype(float)
+
+
+def _heights(ulog, origin_s: float) -> list[HeightSource]:
+    """Every height topic of the log, the estimator's local height first; see module docstring."""
+    out: list[HeightSource | None] = []
+
+    def add(topic: str, field: str, kind: str, d: dict, alt_m, keep=None, home: bool = False) -> None:
+        t = d["timestamp"] / 1e6
+        alt_m = np.asarray(alt_m, float)
+        if keep is not None:
+            t, alt_m = t[keep], alt_m[keep]
+        out.append(height_source(f"{topic}.{field}", kind, t, alt_m, origin_s, home))
+
+    if (lp := _topic(ulog, "vehicle_local_position")) is not None:
+        add("vehicle_local_position", "z", "estimator", lp, -lp["z"].astype(float), home=True)
+    if (gp := _topic(ulog, "vehicle_global_position")) is not None and "alt" in gp:
+        add("vehicle_global_position", "alt", "estimator", gp, gp["alt"])
+    if (ad := _topic(ulog, "vehicle_air_data")) is not None and "baro_alt_meter" in ad:
+        add("vehicle_air_data", "baro_alt_meter", "baro", ad, ad["baro_alt_meter"])
+    elif (sb := _topic(ulog, "sensor_baro")) is not None and "pressure" in sb:
+        p = sb["pressure"].astype(float)
+        add("sensor_baro", "pressure", "baro", sb, pressure_altitude_m(np.where(p > 0, p, np.nan)))
+    for topic in ("vehicle_gps_position", "sensor_gps"):
+        if (g := _topic(ulog, topic)) is None:
+            continue
+        fix = g["fix_type"] >= GPS_FIX_3D if "fix_type" in g else None
+        if "altitude_msl_m" in g:
+            add(topic, "altitude_msl_m", "gps", g, g["altitude_msl_m"], fix)
+        elif "alt" in g:
+            add(topic, "alt", "gps", g, g["alt"] / 1000.0, fix)  # int32 mm before PX4 1.14
+        break
+    if (ds := _topic(ulog, "distance_sensor")) is not None and "current_distance" in ds:
+        cur = ds["current_distance"].astype(float)
+        ok = np.isfinite(cur)
+        if "orientation" in ds:
+            ok &= ds["orientation"] == ROTATION_DOWNWARD_FACING
+        if "min_distance" in ds and "max_distance" in ds:
+            ok &= (cur > ds["min_distance"]) & (cur < ds["max_distance"])
+        add("distance_sensor", "current_distance", "rangefinder", ds, cur, ok)
+    return [h for h in out if h is not None]
 
 
 def load_ulog(path: Path) -> FlightLog:
@@ -101,13 +163,15 @@ def load_ulog(path: Path) -> FlightLog:
     if lp is None or not all(k in lp for k in ("x", "y", "z")):
         raise FlighttestError(f"{path}: log has no position (vehicle_local_position)")
     t = lp["timestamp"] / 1e6
-    cols: dict[str, np.ndarray] = {"n_m": lp["x"], "e_m": lp["y"], "d_m": lp["z"]}
+    cols: dict[str, np.ndarray] = {"n_m": lp["x"], "e_m": lp["y"], "d_m": lp["z"], "boot_s": t}
     if all(k in lp for k in ("vx", "vy", "vz")):
         cols.update(vn_mps=lp["vx"], ve_mps=lp["vy"], vd_mps=lp["vz"])
 
+    attitude_source = None
     if (att := _topic(ulog, "vehicle_attitude")) is not None and (q := _cols(att, "q", 4)) is not None:
         qi = normalise_quaternions(resample(att["timestamp"] / 1e6, continuous_quaternions(q), t, MAX_GAP_S))
         cols.update(qw=qi[:, 0], qx=qi[:, 1], qy=qi[:, 2], qz=qi[:, 3])
+        attitude_source = "vehicle_attitude"
     sc = _topic(ulog, "sensor_combined")
     av = _topic(ulog, "vehicle_angular_velocity")
     rates = (av["timestamp"], _cols(av, "xyz", 3)) if av is not None else (None, None)
@@ -149,8 +213,8 @@ def load_ulog(path: Path) -> FlightLog:
         cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
 
     missing: dict[str, str] = {}
-    t0 = float(np.min(t))
     state = fill_derived(build_state(t, None, cols), missing)
+    t0 = state.attrs["t_origin_s"]
 
     setpoints = None
     sp = _topic(ulog, "trajectory_setpoint") or _topic(ulog, "vehicle_local_position_setpoint")
@@ -173,4 +237,16 @@ def load_ulog(path: Path) -> FlightLog:
                 if src in sp:
                     spd[dst] = sp[src]
         setpoints = pd.DataFrame(spd)
-    return FlightLog(path=Path(path), source="ulog", state=state, setpoints=setpoints, missing=missing, notes=notes)
+    params = {str(k): param_value(v) for k, v in sorted(ulog.initial_parameters.items())}
+    return FlightLog(
+        path=Path(path),
+        source="ulog",
+        state=state,
+        setpoints=setpoints,
+        missing=missing,
+        notes=notes,
+        heights=_heights(ulog, t0),
+        attitude_source=attitude_source,
+        params=params,
+        params_source="ulog" if params else None,
+    )
