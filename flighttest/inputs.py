@@ -145,7 +145,7 @@ VELOCITY_MPS = Range(-MAX_SPEED_MPS, MAX_SPEED_MPS, "m/s")  # one NED component
 WIND_MPS = Range(-MAX_WIND_MPS, MAX_WIND_MPS, "m/s")  # one NED component, for flying
 MARGIN_MPS = Range(0.0, 5.0, "m/s")
 W_ALLOW_MPS = Range(0.0, 20.0, "m/s")  # a straight-down rate tolerated: region check allows 0 (the cone)
-W_ALLOW_POSITIVE_MPS = Range(0.0, 20.0, "m/s", lo_open=True)
+W_ALLOW_POSITIVE_MPS = Range(0.01, 20.0, "m/s")  # a boundary the vehicle can descend along (onsets: ~0.5-2 m/s)
 ACCEL_MPS2 = Range(-MAX_ACCEL_MPS2, MAX_ACCEL_MPS2, "m/s²")
 FRACTION = Range(0.0, 1.0, lo_open=True)
 QUAT_COMPONENT = Range(-100.0, 100.0)  # finite math; the unit norm is checked after, with its own message
@@ -155,7 +155,7 @@ BODY_RATE_DPS = Range(0.0, 3600.0, "°/s", lo_open=True)
 BODY_RATE_RPS = Range(0.0, 63.0, "rad/s", lo_open=True)  # 3600 °/s
 DURATION_S = Range(0.0, MAX_DURATION_S, "s", lo_open=True)
 CHIRP_RATE_RPS2 = Range(0.0, 10.0, "rad/s²", lo_open=True)
-SPEED_STEP_MPS = Range(0.01, 10.0, "m/s")  # the probe's speed grid: ≤ 2000 rows at the speed cap
+SPEED_STEP_MPS = Range(0.01, 10.0, "m/s")  # the probe's speed grid: ≤ 10 000 rows at 100 m/s
 INTERVALS = Range(10, 500, integer=True)  # mesh intervals of the minimum-time solvers
 SYSID = Range(1, 255, integer=True)
 

@@ -87,8 +87,11 @@ class TrajectoryStats:
 def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: float) -> TrajectoryStats:
     # the loader checked the file; the preflight checks again what will actually be flown (a
     # trajectory built or edited in memory never went through the loader)
+    rate = traj.meta.get("resampled_hz")
+    if isinstance(rate, bool) or not isinstance(rate, int | float) or not math.isfinite(rate):
+        rate = None
     try:
-        traj.validate(where="trajectory")
+        traj.validate(where=f"trajectory resampled at {rate:g} Hz" if rate else "trajectory", coarse=bool(rate))
         problem = ""
     except FlighttestError as exc:
         problem = str(exc)

@@ -561,6 +561,18 @@ def test_planner_outputs_pass_the_consistency_checks():
         tr.resample(50.0).validate(X500)
 
 
+@pytest.mark.parametrize("rate_hz", [1.0, 5.0, 20.0, 50.0, 200.0])
+def test_the_preflight_recheck_accepts_resampled_plans_and_still_catches_a_step(rate_hz, tmp_path):
+    region = X500.guard_region()
+    flown = _good_vertical().resample(rate_hz)  # what the mission streams: [flight] rate_hz is 1-200
+    assert pf.trajectory_stats(flown, region, 3.0).problem == ""
+    flown.save(tmp_path / "flown")  # a flight log's copy loads again
+    Trajectory.load(tmp_path / "flown", X500)
+    if rate_hz >= 20:
+        stepped = _step3m(_good_vertical()).resample(rate_hz)
+        assert "consistent" in pf.trajectory_stats(stepped, region, 3.0).problem
+
+
 def test_preflight_refuses_what_the_loader_would():
     region = X500.guard_region()
     good = pf.trajectory_stats(_good_vertical(), region, 3.0)
@@ -764,9 +776,9 @@ def test_random_profiles_load_with_finite_figures_or_are_refused(top, vrs):
     except FlighttestError as exc:
         assert "\n" not in str(exc) and str(exc).startswith("random.toml")
         return
-    s = prof.summary()
-    for key in ("v_h_mps", "w_allow_mps", "w_allow_n", "thrust_to_weight"):
-        assert math.isfinite(s[key]) and s[key] > 0
+    json.dumps(prof.summary(), allow_nan=False)
+    for value in (prof.v_h_mps, prof.w_allow_mps, prof.w_allow_mps / prof.v_h_mps, prof.thrust_to_weight):
+        assert math.isfinite(value) and value > 0
     assert math.isfinite(prof.max_accel_up_mps2) and prof.max_accel_down_mps2 > 0
     prof.guard_region().check(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0)
 
@@ -781,7 +793,8 @@ def _piecewise_constant_accel(draw):
     for _ in range(n_seg):
         dur = draw(st.floats(0.05, 3.0))
         a = np.array([draw(st.floats(-1.0, 1.0)) for _ in range(3)])
-        tau = np.union1d(np.arange(1.0 / rate, dur, 1.0 / rate), [dur])
+        grid = np.arange(1.0 / rate, dur, 1.0 / rate)
+        tau = np.append(grid[grid < dur - 1e-3], dur)  # no two samples closer than 1 ms
         p = p0 + v0 * tau[:, None] + 0.5 * a * tau[:, None] ** 2
         v = v0 + a * tau[:, None]
         t_all.append(t0 + tau)
@@ -801,7 +814,7 @@ def _piecewise_constant_accel(draw):
     return Trajectory(df=pd.DataFrame(cols), meta=meta)
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(_piecewise_constant_accel(), st.integers(0, 10**6), st.sampled_from(["n_m", "d_m", "vn_mps", "vd_mps"]),
        st.floats(-1e6, 1e6))  # fmt: skip
 def test_consistent_trajectories_load_and_perturbed_ones_are_caught(tr, row_seed, col, delta):
@@ -831,3 +844,47 @@ def test_random_tables_are_accepted_or_refused_in_one_line(rows):
             Trajectory(df=df, meta=meta).validate(X500)
         except FlighttestError as exc:
             assert "\n" not in str(exc)
+
+
+_CONFIG_KEYS = {
+    "flight": ["start_height_m", "min_alt_m", "geofence_radius_m", "settle_s", "rate_hz", "land"],
+    "guard": ["horizon_s", "debounce_samples", "stale_periods", "max_descent_mps", "observe_region"],
+    "abort": ["recovery_s", "recover_max_s", "hold_dwell_s"],
+    "plan": ["descent_m", "accel_fraction", "extra_margin_mps", "radius_m", "trajectory"],
+}
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.sampled_from(["vertical", "probe", "helix", "file"]),
+       st.lists(st.tuples(st.sampled_from(sorted(_CONFIG_KEYS)), st.integers(0, 5), _ANY_VALUE),
+                max_size=5))  # fmt: skip
+def test_random_configs_load_typed_and_ranged_or_are_refused(mission, entries):
+    data: dict = {"mission": mission}
+    for section, k, value in entries:
+        keys = _CONFIG_KEYS[section]
+        data.setdefault(section, {})[keys[k % len(keys)]] = value
+    try:
+        cfg = mission_config_from_dict(data, "random.toml")
+    except FlighttestError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("random.toml")
+        return
+    for section in ("flight", "guard", "abort"):
+        for key, value in cfg.to_dict()[section].items():
+            assert value is None or isinstance(value, bool) or math.isfinite(value), (section, key)
+    assert 0 < cfg.flight.start_height_m <= ip.MAX_HEIGHT_M and cfg.flight.min_alt_m < cfg.flight.start_height_m
+    for value in cfg.plan.values():
+        assert isinstance(value, str) or (not isinstance(value, bool) and math.isfinite(value))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.one_of(st.text(max_size=12), st.floats().map(repr), st.integers().map(str)),
+       st.sampled_from([ip.HEIGHT_M, ip.VELOCITY_MPS, ip.SPEED_STEP_MPS, ip.INTERVALS, ip.FRACTION]))  # fmt: skip
+def test_random_command_line_numbers_are_in_range_or_refused(word, rng):
+    import argparse
+
+    try:
+        value = rng(word)
+    except argparse.ArgumentTypeError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("must be")
+        return
+    assert rng.ok(value) and math.isfinite(value)

@@ -48,6 +48,7 @@ import pandas as pd
 
 from flighttest.analysis.exposure import velocity_track
 from flighttest.analysis.fluctuation import FluctuationConfig, hover_mask
+from flighttest.analysis.pipeline import prepare_state
 from flighttest.analysis.schema import RATES, FlightLog
 from flighttest.errors import FlighttestError
 from flighttest.profiles import VehicleProfile
@@ -211,10 +212,8 @@ class _ProbeSamples:
 
 def _probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) -> _ProbeSamples:
     state = log.state
-    if "glitch" not in state:
-        from flighttest.analysis.segment import find_descents
-
-        find_descents(state)
+    if "glitch" not in state:  # not analysed yet: the trusted height and its glitch flags, as analyse has them
+        prepare_state(log)
     t = state["t_s"].to_numpy(float)
     if len(t) < 10:
         raise FlighttestError(f"{log.name}: too few samples to identify an onset ({len(t)})")
@@ -371,9 +370,7 @@ def sweep_fluctuation(
         selection = "no stream phase before the first abort: the sweep was not flown"
     else:
         if descents is None:
-            from flighttest.analysis.segment import find_descents
-
-            descents = find_descents(log.state)[0]
+            descents = prepare_state(log).descents
         kept = [
             r
             for r in descents.itertuples()

@@ -6,7 +6,9 @@ log carries against the ground and each other, and where the state's own estimat
 trusted height into ``state.d_m`` (the original kept as ``d_est_m``/``vd_est_mps``) before the
 descents are found, so descents, rates and exposure come from a height that agrees with the ground.
 The glitch table joins the segmentation's altitude ``"jump"`` spans and the arbitration's
-``"disagreement"`` spans (columns ``segment.GLITCH_COLUMNS``).
+``"disagreement"`` spans (columns ``segment.GLITCH_COLUMNS``). :func:`prepare_state` is that first
+part on its own (heights, descents, glitches), for everything else that needs the trusted height
+(:mod:`flighttest.analysis.identify`).
 """
 
 from __future__ import annotations
@@ -116,6 +118,56 @@ def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
     return descents
 
 
+@dataclass
+class Prepared:
+    """What :func:`prepare_state` found: the height arbitration, the descents timed on the trusted
+    height (columns ``segment.DESCENT_COLUMNS``), every glitch span (``segment.GLITCH_COLUMNS``)."""
+
+    heights: HeightArbitration
+    descents: pd.DataFrame
+    glitches: pd.DataFrame
+    notes: list[str] = field(default_factory=list)
+
+
+def prepare_state(log: FlightLog, seg: SegmentConfig | None = None, h_cfg: HeightConfig | None = None) -> Prepared:
+    """The height every analysis of a log works on, and the descents on it: the one place the rule
+    lives (:func:`analyse` and :mod:`flighttest.analysis.identify` both come through here).
+
+    Arbitrates the log's height sources, puts the trusted height into ``log.state`` (in place:
+    ``d_m``/``vd_mps``, the originals kept as ``d_est_m``/``vd_est_mps``), sets ``state.glitch``,
+    and finds the descents on it. A height change while the vehicle was disarmed throughout, in a
+    log that shows it armed for its flight, is not a descent: PX4's estimator settles by half a
+    metre in the first second after boot and drifts on the ground after landing (a ``.ulg`` starts
+    at boot, our ``.tlog`` only when flighttest connects, so only one of the two would report it).
+    Calling it again on the same log gives the same result (the originals are kept)."""
+    heights = arbitrate(log.state, log.heights, h_cfg)
+    apply(log.state, heights, h_cfg)
+    descents, jumps = find_descents(log.state, seg, bridged=heights.bridged, source=heights.source)
+    notes = list(heights.notes)
+    on_ground = _disarmed_throughout(log.state, descents)
+    if on_ground.any():
+        descents = descents[~on_ground].reset_index(drop=True)
+        descents["descent"] = np.arange(1, len(descents) + 1)
+        notes.append(f"{int(on_ground.sum())} height change(s) while disarmed on the ground: not counted as descents")
+    if len(jumps):
+        notes.append(f"{len(jumps)} estimator glitch(es) flagged (altitude jumps), not counted as descents")
+    return Prepared(heights, descents, _merge_glitches(jumps, heights.glitches), notes)
+
+
+def _disarmed_throughout(state: pd.DataFrame, descents: pd.DataFrame) -> np.ndarray:
+    """Per descent: the armed flag reads 0 at every sample of it while the log shows the vehicle armed
+    somewhere (a log never seen armed, or without the flag, keeps all its descents)."""
+    out = np.zeros(len(descents), dtype=bool)
+    armed = state["armed"].to_numpy(float) if "armed" in state else np.empty(0)
+    if not len(descents) or not (armed == 1).any():
+        return out
+    t = state["t_s"].to_numpy(float)
+    for k, row in enumerate(descents.itertuples()):
+        inside = armed[(t >= row.start_s) & (t <= row.end_s)]
+        out[k] = len(inside) > 0 and bool((inside == 0).all())
+    return out
+
+
 def analyse(
     log: FlightLog,
     vehicle: str | None = None,
@@ -124,10 +176,8 @@ def analyse(
     h_cfg: HeightConfig | None = None,
 ) -> Analysis:
     profile, notes = resolve_profile(log, vehicle)
-    heights = arbitrate(log.state, log.heights, h_cfg)
-    apply(log.state, heights, h_cfg)
-    descents, jumps = find_descents(log.state, seg, bridged=heights.bridged, source=heights.source)
-    glitches = _merge_glitches(jumps, heights.glitches)
+    prep = prepare_state(log, seg, h_cfg)
+    descents, glitches, heights = prep.descents, prep.glitches, prep.heights
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows of absent streams
         fl, baselines = fluctuation(log.state, fl_cfg)
@@ -150,9 +200,7 @@ def analyse(
     descents = _context(log, descents)
     descents.insert(0, "source", log.source)
     descents.insert(0, "log", str(log.path))
-    notes.extend(heights.notes)
-    if len(jumps):
-        notes.append(f"{len(jumps)} estimator glitch(es) flagged (altitude jumps), not counted as descents")
+    notes.extend(prep.notes)
     return Analysis(log, descents, glitches, track, fl, baselines, profile, notes + log.notes, heights)
 
 

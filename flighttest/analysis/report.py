@@ -1,9 +1,13 @@
 """PNG plots (matplotlib Agg) and a Markdown summary that embeds them, one section per log.
 
-Per log: altitude and descent rate over time (descents shaded, glitches marked), the path in plan
-view and 3D, the velocity-space chart (paper Fig. 5/8: VRS/TWS/WBS regions, the cone, the guard
-boundary) with the flight's normalised blade-frame track, and the fluctuation index over descent
-speed (the probe's picture; the identified onset is drawn when there is one).
+Per log: which height the descents were timed on (the arbitration's verdict on every height source,
+:mod:`flighttest.analysis.heights`), the attitude source, the estimator glitches with what each
+height source said; altitude and descent rate over time (descents shaded, glitch spans marked with
+their kind, the estimator's own height drawn beside the trusted one where they differ), the path in
+plan view and 3D, the velocity-space chart (paper Fig. 5/8: VRS/TWS/WBS regions, the cone, the guard
+boundary) with the flight's normalised blade-frame track, and the probe plot: the sweep alone, its
+RMS fluctuation × hover binned over descent speed, with the hover level, the detector's threshold
+and the identified onset with its band (:func:`draw_fluctuation`).
 """
 
 from __future__ import annotations
@@ -43,21 +47,54 @@ def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "log"
 
 
-def _shade(ax, a: Analysis) -> None:
+GLITCH_STYLE = {  # glitch kind → (colour, legend text)
+    "jump": ("red", "glitch: altitude jump"),
+    "disagreement": ("tab:purple", "glitch: height sources disagree"),
+}
+
+
+def _shade(ax, a: Analysis, label: bool = False) -> None:
+    """Descents shaded; glitch spans marked in their kind's colour (named in the legend and, with
+    ``label``, written over the span with the source that went wrong)."""
     for row in a.descents.itertuples():
         ax.axvspan(row.start_s, row.end_s, color="tab:orange", alpha=0.15, lw=0)
+    seen: set[str] = set()
     for row in a.glitches.itertuples():
-        ax.axvspan(row.start_s, row.start_s + max(row.duration_s, 0.05), color="red", alpha=0.4, lw=0)
+        colour, text = GLITCH_STYLE.get(row.kind, ("red", f"glitch: {row.kind}"))
+        ax.axvspan(row.start_s, row.start_s + max(row.duration_s, 0.05), color=colour, alpha=0.3, lw=0,
+                   label=text if label and row.kind not in seen else None)  # fmt: skip
+        seen.add(row.kind)
+        if label:
+            ax.text(row.start_s, 0.98, f" {row.kind}" + (f": {row.source}" if row.source else ""), color=colour,
+                    transform=ax.get_xaxis_transform(), fontsize=7, va="top", rotation=90, clip_on=True)  # fmt: skip
+
+
+def _differs(s: pd.DataFrame, col: str, orig: str) -> bool:
+    """The state has the estimator's original column ``orig`` and it is not the same as ``col``."""
+    if orig not in s:
+        return False
+    a, b = s[col].to_numpy(float), s[orig].to_numpy(float)
+    return not np.allclose(a, b, atol=1e-3, equal_nan=True)
 
 
 def plot_altitude(a: Analysis, out: Path) -> Path:
+    """Height and descent rate over time. The height drawn is the one the descents were timed on
+    (the trusted source); where the arbitration replaced or bridged the estimator's, the estimator's
+    own height (``d_est_m``, in its own datum) and vertical velocity are drawn beside it, dashed."""
     s = a.log.state
+    h = a.heights
+    estimator = a.log.heights[0].name if a.log.heights else "estimator"
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, dpi=100)
-    ax1.plot(s["t_s"], -s["d_m"], lw=1.2, label="altitude (−d)")
-    _shade(ax1, a)
-    ax1.set_ylabel("altitude above origin, m")
+    trusted = f"height from {h.source} ({h.kind}, trusted)" if h is not None else "altitude (−d)"
+    if _differs(s, "d_m", "d_est_m"):
+        ax1.plot(s["t_s"], -s["d_est_m"], lw=1.0, ls="--", color="0.45", label=f"estimator {estimator} as logged")
+    ax1.plot(s["t_s"], -s["d_m"], lw=1.2, color="tab:blue", label=trusted)
+    _shade(ax1, a, label=True)
+    ax1.set_ylabel("height, m (up)" if h is None or h.is_estimator else "height above home, m")
     ax1.legend(loc="best", fontsize=8)
-    ax2.plot(s["t_s"], s["vd_mps"], lw=1.0, label="descent rate vd")
+    if _differs(s, "vd_mps", "vd_est_mps"):
+        ax2.plot(s["t_s"], s["vd_est_mps"], lw=0.9, ls="--", color="0.45", label="estimator vd as logged")
+    ax2.plot(s["t_s"], s["vd_mps"], lw=1.0, color="tab:blue", label="descent rate vd")
     if a.track is not None:
         ax2.plot(a.track["t_s"], a.track["w_mps"], lw=0.8, alpha=0.7, label="w through the disk (air-relative)")
         ax2.axhline(a.profile.w_allow_mps, color="m", ls="--", lw=1, label=f"w_allow {a.profile.w_allow_mps:.2f} m/s")
@@ -343,6 +380,52 @@ def param_differences_section(analyses: list[Analysis], names: list[str]) -> lis
     return [*md, "", "– : the flight's log does not have the parameter (or no parameters at all).", ""]
 
 
+SOURCE_TABLE = {
+    "name": "source",
+    "kind": "kind",
+    "consistent": "consistent",
+    "ground_error_m": "ground error m",
+    "below_ground_m": "below ground m",
+    "max_disagreement_m": "max disagreement m",
+    "reason": "verdict",
+}
+
+
+def source_lines(a: Analysis) -> list[str]:
+    """Markdown bullets naming the height the descents were timed on and the attitude source."""
+    h = a.heights
+    if h is None:
+        height = "the state's own (not arbitrated)"
+    else:
+        est = a.log.heights[0].name if a.log.heights else "state.d_m"
+        why = "" if h.is_estimator else f"; the estimator `{est}` is not consistent with the ground and the others"
+        height = f"`{h.source}` ({h.kind}, of {len(h.sources)} source{'s' if len(h.sources) != 1 else ''}{why})"
+    att = f"`{a.log.attitude_source}`" if a.log.attitude_source else "none (exposure assumes level attitude)"
+    return [f"- height source: {height}", f"- attitude source: {att}"]
+
+
+def heights_section(a: Analysis) -> list[str]:
+    """Markdown lines: every height source with the arbitration's verdict, then the glitch spans with
+    what each source said (referred to home) at the worst instant."""
+    md: list[str] = []
+    if a.heights is not None and len(a.heights.sources) > 1:
+        table = a.heights.sources.assign(consistent=a.heights.sources["consistent"].map({True: "yes", False: "no"}))
+        md += ["### Height sources", "", markdown_table(table, SOURCE_TABLE), ""]
+    md += [f"### Estimator glitches ({len(a.glitches)})", ""]
+    if not len(a.glitches):
+        return [*md, "None: the height sources agree with each other and with the ground.", ""]
+    md += ["| start s | end s | duration s | max jump m | kind | source | what each source said (m above home) |",
+           "|---:|---:|---:|---:|---|---|---|"]  # fmt: skip
+    for g in a.glitches.itertuples():
+        said = g.sources if isinstance(g.sources, dict) else {}
+        said_txt = ", ".join(f"`{k}` {_fmt(float(v))}" for k, v in said.items()) or "–"
+        md.append(
+            f"| {_fmt(g.start_s)} | {_fmt(g.end_s)} | {_fmt(g.duration_s)} | {_fmt(g.max_jump_m)} | {g.kind} | "
+            f"{f'`{g.source}`' if g.source else '–'} | {said_txt} |"
+        )
+    return [*md, ""]
+
+
 def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = None) -> Path:
     """Write the PNGs and ``report.md`` into ``out_dir``; returns the Markdown path."""
     try:
@@ -370,12 +453,14 @@ def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = 
                 f"- vehicle: {a.profile.name} (v_h {a.profile.v_h_mps:.2f} m/s, "
                 f"w_allow {a.profile.w_allow_mps:.2f} m/s: {a.profile.w_allow_source})"
             )
+        md += source_lines(a)
         for k, v in a.log.missing.items():
             md.append(f"- missing {k}: {v}")
         md += [f"- note: {n}" for n in a.notes]
         md += ["", f"### Descents ({len(a.descents)})", ""]
         md.append(markdown_table(a.descents, TABLE_COLUMNS) if len(a.descents) else "No descent found.")
         md.append("")
+        md += heights_section(a)
         md += params_section(a)
         images = [
             ("Altitude and descent rate", plot_altitude(a, out_dir / f"{slug}_altitude.png")),

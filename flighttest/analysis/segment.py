@@ -75,6 +75,29 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1))
 
 
+def _rate(t: np.ndarray, h: np.ndarray, width_s: float) -> np.ndarray:
+    """Descent rate (down-positive) of the up-positive height ``h``: the central difference of the
+    linearly interpolated height over ``width_s`` (clipped at the log's ends), which is the derivative
+    of its centred moving average over that time. Defined in time rather than in samples, so one
+    flight logged at 125 Hz (PX4's ``.ulg``) and at a jittery 50 Hz (our ``.tlog``) gives the same
+    rate, the same runs above the threshold and the same descents: a moving average over a number of
+    samples differs with the rate, and near the threshold a slow creep then chatters into one log's
+    runs and not the other's, which moved a probe descent's start by 1.8 s."""
+    hi = np.minimum(t + 0.5 * width_s, t[-1])
+    lo = np.maximum(t - 0.5 * width_s, t[0])
+    return -(np.interp(hi, t, h) - np.interp(lo, t, h)) / np.maximum(hi - lo, 1e-9)
+
+
+def _level(t: np.ndarray, h: np.ndarray, lo_s: float, hi_s: float, points: int = 201) -> float:
+    """Median height over ``[lo_s, hi_s]`` (clipped to the log) of the linearly interpolated height,
+    on a uniform grid: a time-weighted median, the same whatever the sampling (a median of samples
+    shifts with where the samples fall when the vehicle is still moving)."""
+    lo_s, hi_s = max(lo_s, float(t[0])), min(hi_s, float(t[-1]))
+    if hi_s < lo_s:
+        lo_s = hi_s = min(max(lo_s, float(t[0])), float(t[-1]))
+    return float(np.median(np.interp(np.linspace(lo_s, hi_s, points), t, h)))
+
+
 def _crossing(t: np.ndarray, h: np.ndarray, i: int, level: float) -> float:
     """Time where h crosses ``level`` between samples i−1 and i (linear)."""
     if i <= 0 or h[i] == h[i - 1]:
@@ -127,7 +150,7 @@ def find_descents(
         d[jump] = np.interp(t[jump], t[~jump], d_raw[~jump])
     h = -d
     n_s = _samples(t, cfg.smooth_s)
-    rate = -np.gradient(pd.Series(h).rolling(n_s, center=True, min_periods=1).mean().to_numpy(), t)
+    rate = _rate(t, h, cfg.smooth_s)
     vd = state["vd_mps"].to_numpy(float)
     vd_s = pd.Series(vd).rolling(n_s, center=True, min_periods=1).mean().to_numpy()
 
@@ -145,11 +168,16 @@ def find_descents(
         # a descent ends before the next one starts (an oscillating probe revisits old heights later)
         limit = merged[k + 1][0] if k + 1 < len(merged) else len(t)
         before = (t >= t[a] - cfg.settle_window_s) & (t <= t[a])
+        # the stretch from where the rate crosses the threshold (between samples), so the windows
+        # below sit at the same instants however the log was sampled
+        t_a = _crossing(t, rate, a, cfg.rate_threshold_mps)
+        t_b = _crossing(t, rate, b + 1, cfg.rate_threshold_mps) if b + 1 < len(t) else float(t[b])
+        h0 = _level(t, h, t_a - cfg.settle_window_s, t_a)
         # the end height is measured half a window later: the tail of a descent is still creeping
-        after = (t >= t[b] + 0.5 * cfg.settle_window_s) & (t <= t[b] + 1.5 * cfg.settle_window_s)
-        if not after.any():
-            after = t >= t[b]
-        h0, h1 = float(np.median(h[before])), float(np.median(h[after]))
+        if t_b + 0.5 * cfg.settle_window_s <= t[-1]:
+            h1 = _level(t, h, t_b + 0.5 * cfg.settle_window_s, t_b + 1.5 * cfg.settle_window_s)
+        else:
+            h1 = _level(t, h, float(t[b]), float(t[-1]))
         if h0 - h1 < cfg.min_height_m:
             continue
         lo = int(np.flatnonzero(before)[0])

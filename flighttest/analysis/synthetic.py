@@ -141,6 +141,20 @@ class SyntheticFlight:
             ad += np.where(inside, a * (2 * w0 * np.cos(w0 * tau**2) - 4 * w0**2 * tau**2 * np.sin(w0 * tau**2)), 0.0)
         return d, vd, ad
 
+    def armed(self, t: np.ndarray) -> np.ndarray:
+        """1 where the vehicle is armed, 0 where it stands disarmed at home. A flight that starts on the
+        ground (``start_alt_m`` 0, no probe) arms 1 s before its first move and, when its moves bring it
+        back to home height, disarms 1 s after the last one, as a real log has it: the ground before
+        take-off and after landing is where a height source must read home (flighttest.analysis.heights).
+        A flight that starts in the air is armed throughout."""
+        t = np.asarray(t, float)
+        if abs(self.start_alt_m) > 1e-9 or self.probe is not None or not self.descents:
+            return np.ones_like(t)
+        armed = t >= min(t0 for t0, _, _ in self.descents) - 1.0
+        if abs(self.start_alt_m - sum(h for _, h, _ in self.descents)) < 1e-9:
+            armed &= t <= max(t0 + dur for t0, _, dur in self.descents) + 1.0
+        return armed.astype(float)
+
     def truth_descents(self) -> list[dict[str, float]]:
         return [
             {"start_s": t0, "duration_s": dur, "height_m": h, "max_rate_mps": math.pi * h / (2 * dur)}
@@ -198,7 +212,9 @@ class SyntheticFlight:
             "fy": np.zeros_like(t),
             "fz": ad - G + 5 * amp * wobble(3),
         }
-        out["motors"] = np.column_stack([thrust + 0.2 * amp * wobble(4 + k) for k in range(4)])
+        out["armed"] = self.armed(t)
+        # disarmed on the ground the motors stand still
+        out["motors"] = np.column_stack([thrust + 0.2 * amp * wobble(4 + k) for k in range(4)]) * out["armed"][:, None]
         return out
 
 
@@ -286,7 +302,7 @@ def write_tlog(
                 + mav.heartbeat_encode(
                     mavlink.MAV_TYPE_QUADROTOR,
                     hb_autopilot,
-                    base_armed,
+                    base_armed if s["armed"][i] else mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                     custom_mode,
                     mavlink.MAV_STATE_ACTIVE,
                 ).pack(mav)
@@ -445,7 +461,7 @@ def _ulog_body(name: str, ts: int, s: dict[str, np.ndarray], i: int, old_gps: bo
         r = s["alt_range"][i]
         r = RANGEFINDER_MAX_M if not np.isfinite(r) else r
         return struct.pack("<QfffB", ts, RANGEFINDER_MIN_M, RANGEFINDER_MAX_M, r, 25)
-    return struct.pack("<QBB", ts, 2, 14)  # vehicle_status: armed, OFFBOARD
+    return struct.pack("<QBB", ts, 2 if s["armed"][i] else 1, 14)  # vehicle_status: armed (or standby), OFFBOARD
 
 
 def _ulog_param(name: str, value: float | int) -> bytes:
@@ -563,7 +579,9 @@ def write_dataflash(
         for name, value in (ARDUPILOT_PARAMS if params is None else params).items():
             out.append(rec("PARM", int(us[0]) - 100_000, name.encode(), float(value)))
     out.append(rec("MODE", int(us[0]), ARDUCOPTER_GUIDED, ARDUCOPTER_GUIDED, 0))
-    out.append(rec("ARM", int(us[0]), 1, 0, 0, 0))
+    armed = s["armed"] != 0
+    for i in np.flatnonzero(np.concatenate([[True], armed[1:] != armed[:-1]])):  # ARM at the start and each change
+        out.append(rec("ARM", int(us[i]), int(armed[i]), 0, 0, 0))
     euler = np.degrees(np.column_stack(quat_to_euler(s["q"])))
     lat_all = LAT0_DEG + s["n"] / M_PER_DEG
     lon_all = LON0_DEG + s["e"] / (M_PER_DEG * math.cos(math.radians(LAT0_DEG)))
