@@ -2,7 +2,8 @@
 
 ``Guard.on_sample`` judges one telemetry sample (NED velocity, attitude, wind, altitude, the
 streamer's commanded acceleration) and returns a ``Decision`` carrying every input it used, so the
-flight log can replay why it acted. ``Guard.on_tick`` catches stale telemetry between samples.
+flight log can replay why it acted. ``Guard.on_tick`` catches stale telemetry between samples, by
+the phase of the flight (see "Stale telemetry" below).
 ``AbortLadder`` turns a trigger into the sequence recovery setpoint → Hold → Land and tells the
 runner which command to send next; the runner only executes.
 
@@ -33,7 +34,38 @@ FLUCTUATION = "fluctuation"
 # Actions (guard.csv ``action``)
 NONE = "none"
 ABORT = "abort"
-OBSERVE = "observe"  # region verdict logged but not acted on (probe flights)
+# a verdict logged but not acted on: the region on probe flights; a short telemetry gap while PX4 flies
+OBSERVE = "observe"
+
+# -- Stale telemetry ---------------------------------------------------------------------------------
+# Measured on PX4 SITL (the six reference flights; bench/bench_telemetry.py, bench/RESULTS.md
+# "Telemetry a real link delivers"): each state stream arrives every 20 ms (p50), p99 22-34 ms,
+# p99.9 24-57 ms, but a healthy link delivers nothing for up to 173 ms at a time (position-velocity
+# and attitude merged, as the guard counts them; 209 ms for one stream alone) when the machine or
+# the flying process stalls: PX4 had stamped those messages at most 40 ms apart, they arrive late and
+# together. The longest gap in an offboard phase was 94 ms (the hover in which the old rule aborted
+# probe-stale-abort; 52 ms in the other flights), in PX4's takeoff 64 ms, in its Land 173 ms. The
+# old limit, 3 periods (60 ms), aborted flights on such links. The limit is a time now:
+#
+# - while flighttest flies the vehicle in offboard (OFFBOARD_PHASES), no state sample for
+#   STALE_AFTER_S aborts: 1.45× the longest gap a healthy link showed anywhere, 2.6× the longest in
+#   offboard; with the ticker's period on top (the telemetry period, 20 ms) a dead link is acted on
+#   within 0.27 s, inside the 0.3 s budget of issue 11 (at the helix's 1.3 m/s, 0.35 m flown blind);
+# - where PX4 flies by itself (AUTOPILOT_PHASES: arming, its takeoff, its Land, the Hold that ends
+#   a --no-land flight) flighttest sends nothing the vehicle depends on, so a gap is logged (action
+#   OBSERVE) and only one longer than AUTOPILOT_STALE_S acts (the runner starts the ladder at Hold;
+#   at Land while landing). 1 s: PX4's own offboard-loss timeout (COM_OF_LOSS_T) and longer than
+#   any stall seen (5.8× the worst); at PX4's takeoff climb (MPC_TKO_SPEED 1.5 m/s) 1.5 m
+#   unobserved, which the takeoff height leaves room for;
+# - ``stale_periods`` (telemetry periods) is the older spelling of the offboard limit: when given it
+#   sets ``stale_after_s`` = ``stale_periods`` × the telemetry period (``GuardLimits``: the one place).
+STALE_AFTER_S = 0.25
+AUTOPILOT_STALE_S = 1.0
+# the runner's phases (flighttest.mission set_phase) in which flighttest streams offboard setpoints …
+OFFBOARD_PHASES = frozenset({"climb", "settle", "stream"})
+# … and those in which PX4 flies by itself; any other phase (before arming) is judged as offboard,
+# with the guard disarmed
+AUTOPILOT_PHASES = frozenset({"arm", "takeoff", "land", "hold"})
 
 
 @dataclass(frozen=True)
@@ -42,7 +74,9 @@ class GuardLimits:
 
     region: GuardRegion
     telemetry_period_s: float = 0.02
-    stale_periods: float = 3.0
+    stale_after_s: float = STALE_AFTER_S  # offboard: no state sample this long aborts
+    stale_periods: float | None = None  # the older spelling: when given, stale_after_s = this × the period
+    autopilot_stale_s: float = AUTOPILOT_STALE_S  # PX4 flying itself: a gap this long acts
     horizon_s: float = 0.2
     debounce_samples: int = 3
     clear_violation_mps: float = 0.05
@@ -60,18 +94,18 @@ class GuardLimits:
     fluct_min_accel_std_mps2: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (self.telemetry_period_s > 0 and self.stale_periods > 0 and self.horizon_s >= 0):
-            raise ValueError("telemetry period, stale periods must be > 0 and horizon ≥ 0")
+        if self.stale_periods is not None and self.telemetry_period_s > 0:
+            object.__setattr__(self, "stale_after_s", self.stale_periods * self.telemetry_period_s)
+        if not (self.telemetry_period_s > 0 and self.stale_after_s > 0 and self.horizon_s >= 0):
+            raise ValueError("telemetry period, stale limit (s or periods) must be > 0 and horizon ≥ 0")
+        if self.autopilot_stale_s < self.stale_after_s:  # never stricter where PX4 flies than in offboard
+            object.__setattr__(self, "autopilot_stale_s", self.stale_after_s)
         if self.debounce_samples < 1 or self.clear_violation_mps < 0 or self.fluct_window_s <= 0:
             raise ValueError("debounce_samples ≥ 1, clear_violation_mps ≥ 0, fluct_window_s > 0")
         if (self.fluct_ratio is not None and not self.fluct_ratio > 0) or min(
             self.fluct_min_rate_std_dps, self.fluct_min_accel_std_mps2
         ) < 0:
             raise ValueError("fluct_ratio > 0 and the minimum fluctuation stds ≥ 0")
-
-    @property
-    def stale_after_s(self) -> float:
-        return self.stale_periods * self.telemetry_period_s
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,6 +221,7 @@ class Guard:
         self.limits = limits
         self.last_sample_t: float | None = None  # newest state sample of any stream (staleness)
         self.last_velocity_t: float | None = None  # newest position-velocity sample
+        self.max_gap_s = 0.0  # longest gap between state samples so far (the runner logs and resets it)
         self._suspect_run = 0
         self._rate_std = [FluctuationDetector(limits.fluct_window_s) for _ in range(3)]
         self._accel_std = FluctuationDetector(limits.fluct_window_s)
@@ -254,7 +289,10 @@ class Guard:
     # -- state samples ---------------------------------------------------------------------------
     def note_state_sample(self, t_s: float) -> None:
         """A state sample of any stream (position-velocity, attitude) arrived at ``t_s``."""
-        if self.last_sample_t is None or t_s > self.last_sample_t:
+        last = self.last_sample_t
+        if last is None or t_s > last:
+            if last is not None and t_s - last > self.max_gap_s:
+                self.max_gap_s = t_s - last
             self.last_sample_t = t_s
 
     def on_sample(self, s: GuardSample) -> Decision:
@@ -318,25 +356,47 @@ class Guard:
         self._suspect_run = 0
         return dec(OK, NONE, "")
 
-    def on_tick(self, now_s: float) -> Decision | None:
-        """Stale telemetry: no state sample of any stream for ``stale_periods`` telemetry periods (the
-        streams arrive interleaved, so one late message alone is not a dead link); and, as a second
-        line, no velocity for ``VELOCITY_STALE_FACTOR`` times that (the region cannot be judged
-        without it, even while attitude keeps coming)."""
+    def on_tick(self, now_s: float, phase: str | None = None) -> Decision | None:
+        """Stale telemetry: no state sample of any stream for ``stale_after_s`` (the streams arrive
+        interleaved, so one late message alone is not a dead link); and, as a second line, no velocity
+        for ``VELOCITY_STALE_FACTOR`` times that (the region cannot be judged without it, even while
+        attitude keeps coming). ``None`` while fresh.
+
+        ``phase`` is the runner's (module comment "Stale telemetry"): in ``AUTOPILOT_PHASES`` PX4
+        flies itself and the decision is ``OBSERVE`` (log it) until the gap passes
+        ``autopilot_stale_s``, then ``ABORT`` whether or not the guard is armed (its region verdicts
+        are off while PX4 lands; staleness is not). Anywhere else (offboard, or ``None``) it is
+        ``ABORT`` when the guard is armed, else ``NONE``."""
         if self.last_sample_t is None:
             return None
-        after = self.limits.stale_after_s
+        lim = self.limits
         age = now_s - self.last_sample_t
+        v_age = now_s - self.last_velocity_t if self.last_velocity_t is not None else -math.inf
+        if phase in AUTOPILOT_PHASES:
+            acts = age > lim.autopilot_stale_s or v_age > VELOCITY_STALE_FACTOR * lim.autopilot_stale_s
+            action, after = (ABORT, lim.autopilot_stale_s) if acts else (OBSERVE, lim.stale_after_s)
+            where = f" in {phase}: PX4 flies itself"
+        else:
+            action, after, where = (ABORT if self.armed else NONE), lim.stale_after_s, ""
         if age > after:
-            return Decision(now_s, STALE, ABORT if self.armed else NONE,
-                            f"no telemetry for {age * 1000:.0f} ms (> {after * 1000:.0f} ms)")  # fmt: skip
-        if self.last_velocity_t is not None:
-            v_age = now_s - self.last_velocity_t
-            if v_age > VELOCITY_STALE_FACTOR * after:
-                return Decision(now_s, STALE, ABORT if self.armed else NONE,
-                                f"no position-velocity telemetry for {v_age * 1000:.0f} ms "
-                                f"(> {VELOCITY_STALE_FACTOR * after * 1000:.0f} ms)")  # fmt: skip
-        return None
+            why = f"no telemetry for {age * 1000:.0f} ms (> {after * 1000:.0f} ms)"
+        elif v_age > VELOCITY_STALE_FACTOR * after:
+            v_after_ms = VELOCITY_STALE_FACTOR * after * 1000
+            why = f"no position-velocity telemetry for {v_age * 1000:.0f} ms (> {v_after_ms:.0f} ms)"
+        else:
+            return None
+        return Decision(now_s, STALE, action, why + where)
+
+
+def stale_rung(phase: str) -> Rung:
+    """Where the ladder starts on stale telemetry: Recover in offboard (flighttest flies the vehicle: level,
+    arrest the sink), Hold where PX4 flies itself (its takeoff, its Hold: stop there), Land while landing
+    (PX4 goes on landing; the ladder keeps asking it to, and watches)."""
+    if phase == "land":
+        return Rung.LAND
+    if phase in AUTOPILOT_PHASES:
+        return Rung.HOLD
+    return Rung.RECOVER
 
 
 def _median(values: list[float]) -> float | None:

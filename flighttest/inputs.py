@@ -369,3 +369,11 @@ def check_text(value: Any, name: str, max_chars: int = 1000, single_line: bool =
     if bad:
         raise FlighttestError(f"{name} contains a control character ({bad.group()!r})")
     return value
+
+
+def check_path_text(path: Path | str, what: str) -> str:
+    """The checks every path gets before the file system is asked about it: not empty (``Path('')``
+    is the current folder), no control character, within the file system's length limits (a stat
+    of a longer path raises ``ENAMETOOLONG``). For inputs that may be a file or a folder (log
+    folders); :func:`check_input_file` and :func:`check_output_path` run the same checks."""
+    return _path_text(path, what)

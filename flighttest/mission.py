@@ -22,11 +22,13 @@ from pathlib import Path
 from typing import Any
 
 from flighttest import guard as gd
+from flighttest.analysis import descent_time as dtime
 from flighttest.errors import FlighttestError
 from flighttest.flightlog import FlightLog
 from flighttest.inputs import MAX_DURATION_S
 from flighttest.link import VehicleLink
 from flighttest.missions_config import MissionConfig
+from flighttest.pauses import FlightCollector
 from flighttest.preflight import PreflightResult, param_checks, trajectory_checks, trajectory_stats, vehicle_checks
 from flighttest.profiles import VehicleProfile
 from flighttest.streamer import Setpoint, SetpointStreamer
@@ -41,8 +43,13 @@ LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's 
 # and resampling it at the setpoint rate could need more memory than there is
 MAX_TRAJECTORY_S = MAX_DURATION_S
 LADDER_TIMEOUT_S = 120.0
-LAND_STALE_S = 1.0  # while PX4 lands by itself, telemetry missing longer than this starts the ladder's Land
+# while PX4 flies itself (its takeoff, its Land) telemetry missing longer than this starts the ladder
+LAND_STALE_S = gd.AUTOPILOT_STALE_S
 PARAMS_TIMEOUT_S = 3.0  # the preflight parameter snapshot may delay a flight by at most this
+# a mode counts as reported while armed once the vehicle stayed armed this long after it arrived: PX4
+# changes the mode it reports in the same heartbeat that says it disarmed (LAND → OFFBOARD or HOLD, the
+# mode before), and MAVSDK hands the two over separately
+MODE_SETTLE_S = 0.1
 
 
 @dataclass
@@ -85,6 +92,8 @@ class _Refused(Exception):
 
 
 class MissionRunner:
+    _collector: FlightCollector | None = None  # the garbage collector held off while flying (flighttest.pauses)
+
     def __init__(self, req: FlyRequest) -> None:
         self.req = req
         self.cfg = req.config
@@ -103,7 +112,8 @@ class MissionRunner:
         region = req.profile.guard_region()
         g = self.cfg.guard
         self.limits = gd.GuardLimits(
-            region=region, telemetry_period_s=1.0 / self.fl.telemetry_hz, stale_periods=g.stale_periods,
+            region=region, telemetry_period_s=1.0 / self.fl.telemetry_hz, stale_after_s=g.stale_after_s,
+            stale_periods=g.stale_periods,
             horizon_s=g.horizon_s, debounce_samples=g.debounce_samples, clear_violation_mps=g.clear_violation_mps,
             observe_region=g.observe_region, min_alt_m=self.fl.min_alt_m, max_descent_mps=g.max_descent_mps,
             fluct_window_s=g.fluct_window_s, max_rate_std_dps=g.max_rate_std_dps,
@@ -120,13 +130,17 @@ class MissionRunner:
         self.end_point: tuple[float, float, float] | None = None
         self.t_stream_start: float | None = None
         self.descent_time_s: float | None = None
+        self.horizontal_error_m: float | None = None  # off the end point sideways when the descent was reached
+        self.descent_timer: dtime.DescentTimer | None = None  # the vertical-axis rule (analysis.descent_time)
+        self.ladder_phase: str | None = None  # the abort ladder's last phase event (abort_recover|hold|land)
+        self.mode_while_armed: str | None = None  # the flight mode last reported while armed
+        self._t_mode_change = -math.inf
         self.expect_offboard = False
         self.abort_event = asyncio.Event()
         self.abort_verdict = ""
         self._ladder_cmds: asyncio.Queue[str] = asyncio.Queue()
         self._recovery_task: asyncio.Task | None = None
         self._land_task: asyncio.Task | None = None  # the ladder's Land command, sent in the background
-        self._land_stale_since: float | None = None  # a telemetry gap during the nominal landing began then
         self._bg: list[asyncio.Task] = []
         self._signals = 0
         self.first_inside_region_t: float | None = None
@@ -181,12 +195,15 @@ class MissionRunner:
             self.first_inside_region_t = t
         if d.aborts:
             self.abort(d.reason, verdict=d.verdict)
-        if self.t_stream_start is not None and self.descent_time_s is None and self.end_point is not None:
-            dn, de, dd = (st.n_m - self.end_point[0], st.e_m - self.end_point[1], st.d_m - self.end_point[2])
-            speed = math.sqrt(st.vn_mps**2 + st.ve_mps**2 + st.vd_mps**2)
-            if math.sqrt(dn * dn + de * de + dd * dd) <= 0.2 and speed <= 0.3 and self.phase in ("stream", "settle"):
-                self.descent_time_s = t - self.t_stream_start
-                self.event("descent_reached", descent_time_s=round(self.descent_time_s, 3))
+        if st.armed and t - self._t_mode_change >= MODE_SETTLE_S:
+            self.mode_while_armed = st.flight_mode
+        timer = self.descent_timer
+        if timer is not None and timer.result is None and self.phase in dtime.DESCENT_PHASES and not self.ladder.active:
+            r = timer.update(t, st.n_m, st.e_m, st.d_m, st.vd_mps)
+            if r is not None:
+                self.descent_time_s, self.horizontal_error_m = r.descent_time_s, r.horizontal_error_m
+                self.event("descent_reached", **r.fields(), reached_t_s=round(r.t_s - self.log.t0_mono, 3),
+                           rule=timer.rule.describe())  # fmt: skip
 
     def _on_imu(self, t: float) -> None:
         st = self.link.state
@@ -198,6 +215,7 @@ class MissionRunner:
                     self.abort(d.reason, verdict=d.verdict)
 
     def _on_mode(self, old: str, new: str) -> None:
+        self._t_mode_change = time.monotonic()
         self.event("mode", old=old, new=new)
         if self.phase == "land" and new in PILOT_MODES and not self.ladder.active:
             # the pilot takes the landing over: send nothing more (the ladder, once started, sees it itself)
@@ -223,38 +241,87 @@ class MissionRunner:
             self.abort("link lost while landing", gd.Rung.LAND)
 
     async def _stale_ticker(self) -> None:
-        period = self.limits.telemetry_period_s
-        while True:
-            await asyncio.sleep(period)
-            d = self.guard.on_tick(time.monotonic())
-            if d is not None:
-                # samples MAVSDK already handed over wait in the subscription queues until their
-                # tasks run: let them run (a busy loop wakes this timer first), then judge again
-                for _ in range(3):
-                    await asyncio.sleep(0)
-                d = self.guard.on_tick(time.monotonic())
-            if d is not None and d.aborts:
-                self.last_decision = d
-                if self.log is not None:
-                    self.log.guard(d)
-                self.abort(d.reason, verdict=d.verdict)
-            elif d is not None and d.verdict == gd.STALE and self.phase == "land" and not self.ladder.active:
-                # the guard is off while landing (below the floor is the point), staleness is not. PX4
-                # flies its own Land, so a short gap is no reason to abort a finished descent: it is
-                # logged once per gap; a gap longer than LAND_STALE_S hands over to the ladder's Land,
-                # which keeps re-sending Land and gives up after LINK_GIVE_UP_S
-                now = time.monotonic()
-                if self._land_stale_since is None:
-                    self._land_stale_since = now
+        """Stale telemetry between samples, every telemetry period, by phase (``flighttest.guard``,
+        "Stale telemetry"): while flighttest flies offboard, no state sample for ``stale_after_s`` aborts
+        (the ladder starts at Recover). Where PX4 flies itself (arming, its takeoff, its Land, the Hold
+        of --no-land) a gap is logged once per gap (``stale_while_landing`` / ``stale_while_<phase>``) and
+        only one longer than ``autopilot_stale_s`` starts the ladder: at Hold, or at Land while landing,
+        where the ladder's Land keeps re-sending Land and gives up after LINK_GIVE_UP_S. Once the ladder
+        runs it watches the telemetry itself. Each phase's longest gap goes to the log (``telemetry_gaps``)."""
+        lim = self.limits
+        period = lim.telemetry_period_s
+        self.event("stale_rule", offboard_s=lim.stale_after_s, autopilot_s=lim.autopilot_stale_s,
+                   velocity_factor=gd.VELOCITY_STALE_FACTOR, tick_s=period)  # fmt: skip
+        gap_noted = False
+        gaps_phase = self.phase
+        try:
+            while True:
+                await asyncio.sleep(period)
+                if self.phase != gaps_phase:
+                    self._log_gaps(gaps_phase)
+                    gaps_phase = self.phase
+                d = self.guard.on_tick(time.monotonic(), self.phase)
+                if d is not None:
+                    # samples MAVSDK already handed over wait in the subscription queues until their
+                    # tasks run: let them run (a busy loop wakes this timer first), then judge again
+                    for _ in range(3):
+                        await asyncio.sleep(0)
+                    d = self.guard.on_tick(time.monotonic(), self.phase)
+                if d is None:
+                    gap_noted = False
+                elif self.ladder.active:
+                    pass  # the ladder judges freshness itself (telemetry_fresh), and Land watches it
+                elif d.aborts:
+                    self.last_decision = d
                     if self.log is not None:
                         self.log.guard(d)
-                    self.event("stale_while_landing", reason=d.reason)
-                elif now - self._land_stale_since > LAND_STALE_S:
-                    self.abort(f"{d.reason} while landing", gd.Rung.LAND, verdict=d.verdict)
-            elif d is None:
-                self._land_stale_since = None
-            if self.log is not None:
-                self.log.flush_if_due()
+                    self.abort(d.reason, gd.stale_rung(self.phase), verdict=d.verdict)
+                elif d.action == gd.OBSERVE and not gap_noted:
+                    gap_noted = True
+                    if self.log is not None:
+                        self.log.guard(d)
+                    self.event("stale_while_landing" if self.phase == "land" else f"stale_while_{self.phase}",
+                               reason=d.reason)  # fmt: skip
+                if self._collector is not None:
+                    self._collector.maybe_collect()
+                if self.log is not None:
+                    self.log.flush_if_due()
+        finally:
+            self._log_gaps(gaps_phase)
+
+    def _log_gaps(self, phase: str) -> None:
+        """The longest gap between state samples (any stream, as the loop handled them) in ``phase``."""
+        if self.guard.max_gap_s > 0:
+            self.event("telemetry_gaps", phase=phase, max_gap_ms=round(self.guard.max_gap_s * 1000.0, 1))
+        self.guard.max_gap_s = 0.0
+
+    # -- loop pauses: the garbage collector (flighttest.pauses) --------------------------------------
+    def _freeze_heap(self) -> None:
+        """Connected, before the preflight: one full collection (a full one of this heap pauses the process
+        for up to a few hundred ms) and everything alive frozen, out of every later collection."""
+        if self._collector is None:
+            self._collector = FlightCollector().__enter__()
+            st = self._collector.stats
+            self.event("gc", what="heap frozen", ms=round(st.entry_ms, 1), frozen=st.frozen)
+
+    def _hold_off_collector(self) -> None:
+        """Preflight done, arming next: what it made frozen too, and no automatic collections until the
+        flight is over (only at the safe points)."""
+        if self._collector is not None:
+            ms = self._collector.hold_off()
+            self.event("gc", what="held off", ms=round(ms, 1), frozen=self._collector.stats.frozen)
+
+    def _collect_now(self) -> None:
+        """A safe point: collect what the flight made so far (the rest is frozen: a few ms)."""
+        if self._collector is not None:
+            self.event("gc", what="safe point", ms=round(self._collector.safe_point(), 2))
+
+    def _restore_collector(self) -> None:
+        """Every exit of a flight: the collector as it was before, and what it did meanwhile."""
+        if self._collector is not None:
+            gcx, self._collector = self._collector, None
+            gcx.__exit__(None, None, None)
+            self.event("gc", what="restored", **gcx.stats.to_dict())
 
     # -- the run -------------------------------------------------------------------------------------
     async def run(self) -> FlightOutcome:
@@ -319,8 +386,9 @@ class MissionRunner:
                          setpoints_sent=self.streamer.sent, watchdog_fired=self.streamer.watchdog_fired)  # fmt: skip
         if self.link is not None:
             st = self.link.state
-            extra.update(final_mode=st.flight_mode, final_armed=st.armed, final_landed_state=st.landed_state,
-                         final_alt_m=st.alt_m)  # fmt: skip
+            extra.update(final_armed=st.armed, final_landed_state=st.landed_state, final_alt_m=st.alt_m,
+                         **final_mode(st.flight_mode, st.armed, self.mode_while_armed))  # fmt: skip
+        extra["horizontal_error_m"] = self.horizontal_error_m
         if self.ladder.history:
             extra["ladder"] = [{"t_s": round(t - self.log.t0_mono, 3), "rung": r, "why": w}
                                for t, r, w in self.ladder.history]  # fmt: skip
@@ -346,6 +414,7 @@ class MissionRunner:
             await link.close()
             return self._outcome("aborted", self.ladder.reason)
         try:
+            self._freeze_heap()  # connected, nothing flying yet: the one long collection goes here
             self.streamer = SetpointStreamer(link.offboard._plugin, self.log, self.fl.rate_hz,
                                              here=lambda: (link.state.n_m, link.state.e_m, link.state.d_m))  # fmt: skip
             link.on_posvel.append(self._on_posvel)
@@ -364,6 +433,7 @@ class MissionRunner:
             with panel if panel is not None else contextlib.nullcontext():
                 return await self._fly()
         finally:
+            self._restore_collector()
             for t in self._bg:
                 t.cancel()
             await asyncio.gather(*self._bg, return_exceptions=True)
@@ -468,6 +538,7 @@ class MissionRunner:
         link, fl = self.link, self.fl
         st = link.state
         H = fl.start_height_m
+        self._hold_off_collector()
         self.set_phase("arm")
         self.guard.armed = True
         await link.call(link.action.arm(), "arm", 10.0)
@@ -509,13 +580,16 @@ class MissionRunner:
             return None
         self.origin = start
         last = self.traj.df.iloc[-1]
-        if math.dist((last["n_m"], last["e_m"], last["d_m"]), (0.0, 0.0, 0.0)) > START_TOL_M:
+        if dtime.goes_somewhere((last["n_m"], last["e_m"], last["d_m"])):
             # a descent time only where the trajectory goes somewhere (the probe returns to its start)
             self.end_point = (start[0] + last["n_m"], start[1] + last["e_m"], start[2] + last["d_m"])
         self.set_phase("stream")
         self.floor_active = True
         self.t_stream_start = time.monotonic()
-        self.event("stream_start", origin_ned=list(start), rows=len(self.traj.df))
+        if self.end_point is not None:
+            self.descent_timer = dtime.DescentTimer(self.t_stream_start, self.end_point)
+        self.event("stream_start", origin_ned=list(start), rows=len(self.traj.df),
+                   end_ned=None if self.end_point is None else [float(x) for x in self.end_point])  # fmt: skip
         rate_base, accel_base = self.guard.freeze_baseline()
         rate_thr, accel_thr = self.guard.fluct_thresholds()
         self.event("fluct_baseline", rate_std_dps=rate_base, accel_std_mps2=accel_base,
@@ -553,6 +627,7 @@ class MissionRunner:
     async def _settle(self, sp: Setpoint, min_s: float, max_s: float, baseline: bool = False) -> None:
         """Hover at ``sp`` until settled; with ``baseline`` the guard's hover fluctuation baseline is
         the settled part of it (the climb's transient is not the hover)."""
+        self._collect_now()  # PX4 holds the position: a pause of a few ms costs nothing here
         st = self.link.state
         t0 = time.monotonic()
         settled_since = None
@@ -628,8 +703,10 @@ class MissionRunner:
                     if nxt:
                         await self._execute(nxt)
                     return
+                self._ladder_phase("abort_recover")
                 self._recovery_task = asyncio.create_task(self._recover())
             elif cmd == gd.CMD_HOLD:
+                self._ladder_phase("abort_hold")
                 await self._stop_recovery()
                 if math.isfinite(st.n_m):
                     yaw = self.streamer.last.yaw_deg if self.streamer.last else 0.0
@@ -639,6 +716,7 @@ class MissionRunner:
                 else:
                     await link.call(link.action.hold(), "hold", 5.0)
             elif cmd == gd.CMD_LAND:
+                self._ladder_phase("abort_land")
                 await self._stop_recovery()
                 # in the background: with the link gone the call takes its whole timeout, and the
                 # ladder must go on watching (and give up) meanwhile
@@ -652,6 +730,15 @@ class MissionRunner:
                 nxt = self.ladder.escalate(time.monotonic(), f"hold failed: {exc}")
                 if nxt:
                     self._ladder_cmds.put_nowait(nxt)
+
+    def _ladder_phase(self, phase: str) -> None:
+        """A ``phase`` event for the rung the ladder now commands (once per rung), so whatever the vehicle
+        does from here (PX4's own Land after an abort included) is labelled an abort in the log and never
+        taken for the flight's descent. ``self.phase`` stays the nominal flow's: where the flight was
+        when it aborted (``phase_at_end``)."""
+        if phase != self.ladder_phase:
+            self.ladder_phase = phase
+            self.event("phase", phase=phase, nominal_phase=self.phase)
 
     async def _send_land(self) -> None:
         try:
@@ -696,6 +783,15 @@ class MissionRunner:
         await self.streamer.stream(rec_at, "recover", max_ticks=ticks)
         hold = Setpoint(st.n_m, st.e_m, st.d_m, yaw_deg=yaw)
         await self.streamer.stream(lambda k: hold, "recover_hold")
+
+
+def final_mode(reported: str, armed: bool, while_armed: str | None) -> dict[str, Any]:
+    """``final_mode`` of ``summary.json``: the mode the vehicle reports, or, once it has disarmed, the mode
+    it was in when it disarmed (PX4 reports the mode before the landing after disarming: OFFBOARD
+    or HOLD on the ground); ``final_mode_note`` says which, and what it reports now, when they differ."""
+    if armed or while_armed is None or while_armed == reported:
+        return {"final_mode": reported, "final_mode_note": None if armed or while_armed is None else "at disarm"}
+    return {"final_mode": while_armed, "final_mode_note": f"at disarm; {reported} reported after disarming"}
 
 
 def check_duration(traj: Trajectory, what: str = "trajectory") -> None:

@@ -5,7 +5,7 @@
     mission = "vertical"          # probe | helix | vertical | file
     [flight]    start_height_m, min_alt_m, geofence_radius_m, settle_s, rate_hz, land, takeoff_timeout_s
     [plan]      the mission's planner inputs (per mission: see _PLAN)
-    [guard]     horizon_s, debounce_samples, clear_violation_mps, stale_periods, observe_region,
+    [guard]     horizon_s, debounce_samples, clear_violation_mps, stale_after_s (or stale_periods), observe_region,
                 max_descent_mps, fluct_window_s, max_rate_std_dps, max_accel_std_mps2, fluct_ratio,
                 fluct_min_rate_std_dps, fluct_min_accel_std_mps2
     [abort]     recover_max_s, arrested_vd_mps, hold_confirm_s, hold_dwell_s, recovery_lateral_mps,
@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from flighttest.errors import FlighttestError
+from flighttest.guard import AUTOPILOT_STALE_S, STALE_AFTER_S
 from flighttest.inputs import (
     ALTITUDE_FLOOR_M,
     CHIRP_RATE_RPS2,
@@ -65,7 +66,9 @@ class GuardConfig:
     horizon_s: float = 0.2
     debounce_samples: int = 3
     clear_violation_mps: float = 0.05
-    stale_periods: float = 3.0
+    # no state telemetry this long while flighttest flies offboard: abort (flighttest.guard "Stale telemetry")
+    stale_after_s: float = STALE_AFTER_S
+    stale_periods: float | None = None  # the older spelling, in telemetry periods: when given it wins
     observe_region: bool = False
     max_descent_mps: float | None = None
     fluct_window_s: float = 0.5
@@ -134,6 +137,7 @@ _RANGES: dict[str, Range] = {
     "horizon_s": Range(0.0, 5.0, _S),
     "debounce_samples": Range(1, 100, integer=True),
     "clear_violation_mps": MARGIN_MPS,
+    "stale_after_s": Range(0.0, AUTOPILOT_STALE_S, _S, lo_open=True),  # beyond: longer than PX4 flying itself
     "stale_periods": Range(0.0, 100.0, lo_open=True),
     "max_descent_mps": SPEED_MPS,
     "fluct_window_s": Range(0.0, 10.0, _S, lo_open=True),
@@ -185,6 +189,9 @@ _PLAN: dict[str, dict[str, Range | str]] = {
     },
     "file": {},  # a trajectory file is flown as planned
 }
+# how far below its start height each mission goes: the [plan] key `flighttest fly --descent` sets
+# (the probe's sweep depth is its amplitude; a trajectory file's descent is in the file)
+DESCENT_KEYS = {"probe": "amplitude_m", "helix": "descent_m", "vertical": "descent_m"}
 
 
 def _number(where: str, key: str, value: Any, rng: Range) -> float | int:

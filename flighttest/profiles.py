@@ -356,10 +356,37 @@ def profile_to_dict(profile: VehicleProfile) -> dict[str, Any]:
     return d
 
 
+# Where a measured onset (a stored w_allow) can lie for a vehicle, relative to Onera's straight-down
+# boundaries for the profile's own ε (aero.onera_vertical_boundary_n; defaults: the VRS is entered at
+# 0.135 v_h, its core, the TWS, at 0.415 v_h, and left at 1.335 v_h). The paper's measured Mambo onset
+# sits on Onera's entry; a third of it (0.045 v_h) leaves room for a rotor whose wake the frame disturbs
+# early, and below it an "onset" is hover noise plus the descent's own accelerations. Past 1.5× the TWS
+# entry (0.62 v_h) the ring would have to be fully formed and still calm: a rise found there is not the
+# entry into the VRS. Below the guard's margin a boundary would leave the guard no descent to allow.
+ONSET_MIN_OF_VRS_ENTRY = 1.0 / 3.0
+ONSET_MAX_OF_TWS_ENTRY = 1.5
+
+
+def plausible_w_allow_range(profile: VehicleProfile) -> tuple[float, float]:
+    """``(lo, hi)`` m/s: a measured onset must lie strictly above ``lo`` and at most ``hi`` (see above)."""
+    entry = aero.onera_vertical_boundary_n(profile.vrs.eps_vrs) * profile.v_h_mps
+    core = aero.onera_vertical_boundary_n(profile.vrs.eps_tws) * profile.v_h_mps
+    return max(profile.vrs.margin_mps, ONSET_MIN_OF_VRS_ENTRY * entry), ONSET_MAX_OF_TWS_ENTRY * core
+
+
 def write_w_allow(profile: VehicleProfile, w_allow_mps: float, source: str, target: Path | None = None) -> Path:
-    """Store a measured ``w_allow`` (with its provenance) in the user's copy of the profile, or in ``target``."""
-    if not (math.isfinite(w_allow_mps) and w_allow_mps > 0):
+    """Store a measured ``w_allow`` (with its provenance) in the user's copy of the profile, or in ``target``.
+    A value the model cannot explain for this vehicle (:func:`plausible_w_allow_range`) is refused here
+    too, whoever measured it: every later plan and guard would trust it."""
+    if not (isinstance(w_allow_mps, int | float) and math.isfinite(w_allow_mps) and w_allow_mps > 0):
         raise FlighttestError(f"refusing to store w_allow={w_allow_mps!r}: must be a positive number")
+    lo, hi = plausible_w_allow_range(profile)
+    if not lo < w_allow_mps <= hi:
+        raise FlighttestError(
+            f"refusing to store w_allow={w_allow_mps:.4g} m/s for {profile.name}: not a plausible VRS onset "
+            f"(must lie above {lo:.3f} m/s — the guard margin and a third of Onera's entry — and at most "
+            f"{hi:.3f} m/s, 1.5× Onera's TWS entry; v_h {profile.v_h_mps:.2f} m/s)"
+        )
     updated = replace(profile, vrs=replace(profile.vrs, w_allow_mps=float(w_allow_mps), source=source))
     if target is None:
         src = Path(profile.path)

@@ -284,8 +284,9 @@ def test_analyse_dir_walks_all_formats_writes_parquet_and_reports_bad_files(tmp_
     code, out, err = _cli(capsys, "analyse", str(root), "--vehicle", "x500", "--json", "--jobs", "2")
     assert code == 2  # the broken file is reported, the rest still analysed
     assert "broken.tlog" in err and "empty file" in err and len(err.strip().splitlines()) == 1
-    logs = json.loads(out)
-    assert sorted(x["source"] for x in logs) == ["dataflash", "tlog", "ulog"]
+    logs = json.loads(out)  # one entry per log: the broken one is {"log", "error"} (docs/CONTRACTS.md)
+    assert [x["log"] for x in logs if "error" in x] == [str(root / "a" / "broken.tlog")]
+    assert sorted(x["source"] for x in logs if "error" not in x) == ["dataflash", "tlog", "ulog"]
     table = pd.read_parquet(root / "flighttest-descents.parquet")
     assert len(table) == 3 and set(table["source"]) == {"tlog", "ulog", "dataflash"}
     assert np.allclose(table["height_m"], H, atol=0.03)

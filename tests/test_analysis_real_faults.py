@@ -44,8 +44,9 @@ EXPOSURE = ("time_inside_s", "time_near_s", "min_margin_mps")
 TOL_S, TOL_M = 0.1, 0.1
 
 
-def landing_window(cfg: SegmentConfig = SegmentConfig()) -> tuple[float, float]:
+def landing_window() -> tuple[float, float]:
     """Start and end of the landing under the segmentation's start/end tolerances (raised cosine)."""
+    cfg = SegmentConfig()
     start = LAND_T0 + LAND_D / math.pi * math.acos(1 - 2 * cfg.start_tol_m / LAND_H)
     end = LAND_T0 + LAND_D / math.pi * math.acos(-1 + 2 * cfg.end_tol_m / LAND_H)
     return start, end
@@ -155,3 +156,33 @@ def test_dataflash_without_att_names_its_attitude(analysed, capsys):
     d, _ = analysed("offset", "bin", capsys)
     assert d["attitude_source"] == "AHR2"
     assert Path(d["log"]).suffix == ".bin" and d["source"] == "dataflash"
+
+
+def test_report_names_the_sources_and_draws_both_heights(tmp_path, monkeypatch):
+    """report.md says which height and attitude the numbers came from and lists the glitch with what
+    each source said; the altitude plot draws the estimator's own height beside the trusted one and
+    marks the glitch span with its kind."""
+    from flighttest.analysis import report
+    from flighttest.analysis.pipeline import analyse
+
+    write, _, estimator, baro, _ = FORMATS["bin"]
+    exc = analyse(load_log(write(FLIGHTS["excursion"], tmp_path / "exc.bin")), "x500")
+    off = analyse(load_log(write(FLIGHTS["offset"], tmp_path / "off.bin")), "x500")
+    lines = report.source_lines(off)
+    assert f"`{baro}` (baro" in lines[0] and f"the estimator `{estimator}` is not consistent" in lines[0]
+    assert lines[1] == "- attitude source: `AHR2`"
+    md = "\n".join(report.heights_section(exc))
+    assert "### Height sources" in md and "### Estimator glitches (1)" in md
+    row = next(line for line in md.splitlines() if "| disagreement |" in line)
+    assert f"`{estimator}` -7.50" in row and f"`{baro}` -0.0" in row
+
+    figures = []
+    monkeypatch.setattr(report.plt, "close", figures.append)
+    assert report.plot_altitude(exc, tmp_path / "exc.png").is_file()
+    monkeypatch.undo()
+    (fig,) = figures
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert f"estimator {estimator} as logged" in legend and "glitch: height sources disagree" in legend
+    assert any(f"{estimator} (estimator, trusted), glitches bridged" in t for t in legend)
+    assert any(t.get_text().strip() == f"disagreement: {estimator}" for t in fig.axes[0].texts)
+    report.plt.close(fig)

@@ -93,7 +93,7 @@ BAD_CONFIG_BYTES = {
     "cfg_height": VERTICAL_TOML.replace("start_height_m = 5.0", "start_height_m = 1e308").encode(),
     "cfg_geofence": VERTICAL_TOML.replace("geofence_radius_m = 10.0", "geofence_radius_m = inf").encode(),
     "cfg_debounce": VERTICAL_TOML.replace("debounce_samples = 3", "debounce_samples = 1000000000").encode(),
-    "cfg_stale": VERTICAL_TOML.replace("stale_periods = 3.0", "stale_periods = 1e300").encode(),
+    "cfg_stale": VERTICAL_TOML.replace("stale_after_s = 0.25", "stale_periods = 1e300").encode(),
     "cfg_mission": VERTICAL_TOML.replace('mission = "vertical"', 'mission = ["vertical"]').encode(),
     "cfg_table": b'mission = "vertical"\nflight = 5\n',
 }

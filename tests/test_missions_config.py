@@ -19,7 +19,8 @@ def test_the_shipped_mission_configs_load(mission):
     cfg = load_mission_config(MISSIONS_DIR / f"{MISSIONS[mission]}.toml")
     assert cfg.mission == mission
     assert cfg.flight.start_height_m > cfg.flight.min_alt_m
-    assert cfg.to_dict()["guard"]["stale_periods"] == 3.0  # the field default: 60 ms at 50 Hz
+    # the field default (flighttest.guard.STALE_AFTER_S), not the older 3 periods = 60 ms
+    assert cfg.to_dict()["guard"]["stale_after_s"] == 0.25 and cfg.guard.stale_periods is None
 
 
 def test_defaults_and_types():

@@ -1,26 +1,46 @@
 """Many flights at once: walk a folder, analyse every log on every core, keep a Parquet history.
 
 ``find_logs(root)`` returns flighttest log folders (a folder counts once, its ``flight.tlog`` is
-not listed again) and loose ``.tlog``/``.bin``/``.ulg`` files. ``analyse_many`` runs the pipeline
-in a process pool (``os.cpu_count()`` workers); a log that fails gives one error line, not a
-stopped campaign. ``write_parquet`` stores the per-descent table (one row per descent, the
-``log`` column says which file) for pandas or DuckDB.
+not listed again) and loose log files: named ``.tlog``/``.bin``/``.ulg``, or of any name when
+their first bytes are a log's (:func:`flighttest.analysis.loaders.looks_like_log`); FIFOs and
+devices are never listed (reading one would block). ``analyse_many`` runs the pipeline in a process
+pool (``os.cpu_count()`` workers); a log that fails gives one error line, not a stopped campaign.
+``write_parquet`` stores the per-descent table (one row per descent, the ``log`` column says which
+file) for pandas or DuckDB, written whole or not at all.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import warnings
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
-from flighttest.analysis.loaders import LOG_SUFFIXES
+from flighttest.analysis.loaders import looks_like_log
 from flighttest.analysis.loaders.folder import is_log_folder
 from flighttest.analysis.segment import SegmentConfig
 from flighttest.errors import FlighttestError
+from flighttest.inputs import atomic_write
 
 PARQUET_NAME = "flighttest-descents.parquet"
+MAX_JOBS = 256  # worker processes: beyond any machine's cores, and each holds a log in memory
+
+
+@contextlib.contextmanager
+def quiet_numerics() -> Iterator[None]:
+    """Around the analysis of one log: numpy's RuntimeWarnings (all-NaN windows of streams a log
+    lacks, divisions by a zero spread) and matplotlib's layout warnings about empty axes say nothing
+    the analysis does not handle, and on stderr they were up to 35 lines per log. Only inside this
+    block: a caller's own code keeps its warnings."""
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        warnings.filterwarnings("ignore", category=UserWarning, module=r"matplotlib\..*")
+        yield
 
 
 def find_logs(root: Path) -> list[Path]:
@@ -32,7 +52,7 @@ def find_logs(root: Path) -> list[Path]:
             dirnames.clear()
             continue
         dirnames.sort()
-        found += [d / f for f in sorted(filenames) if Path(f).suffix.lower() in LOG_SUFFIXES]
+        found += [d / f for f in sorted(filenames) if f != PARQUET_NAME and looks_like_log(d / f)]
     return found
 
 
@@ -41,12 +61,15 @@ def _one(args: tuple[str, str | None, SegmentConfig | None]) -> tuple[str, dict 
     from flighttest.analysis.pipeline import analyse_path
 
     try:
-        a = analyse_path(path, vehicle, seg)
+        with quiet_numerics():
+            a = analyse_path(path, vehicle, seg)
+            result = {"summary": a.summary(), "descents": a.descents, "events": a.log.events, "meta": a.log.meta}
     except FlighttestError as exc:
         return path, None, str(exc)
     except Exception as exc:  # a worker must never take the campaign down
-        return path, None, f"{path}: analysis failed ({type(exc).__name__}: {exc})"
-    return path, {"summary": a.summary(), "descents": a.descents, "events": a.log.events, "meta": a.log.meta}, None
+        detail = " ".join(f"{type(exc).__name__}: {exc}".split())[:200]
+        return path, None, f"{path}: analysis failed ({detail})"
+    return path, result, None
 
 
 def analyse_many(
@@ -54,22 +77,27 @@ def analyse_many(
 ) -> list[tuple[str, dict | None, str | None]]:
     """(path, {"summary", "descents", "events", "meta"} or None, error or None) per log, in input order."""
     jobs = [(str(p), vehicle, seg) for p in paths]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs), MAX_JOBS))
     if workers == 1:
         return [_one(j) for j in jobs]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         return list(pool.map(_one, jobs))
 
 
-def write_parquet(tables: list[pd.DataFrame], out: Path) -> Path:
+def descent_table(tables: list[pd.DataFrame]) -> pd.DataFrame:
+    """The per-descent tables of many logs as one (an empty table with the key columns when none)."""
     frames = [t for t in tables if len(t)]
-    df = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["log", "descent"])
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["log", "descent"])
+
+
+def write_parquet(tables: list[pd.DataFrame], out: Path) -> Path:
+    df = descent_table(tables)
     for col in df.columns:
         if df[col].dtype == object:
             df[col] = df[col].astype("string")
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        df.to_parquet(out, index=False)
+        with atomic_write(out) as tmp:
+            df.to_parquet(tmp, index=False)
     except OSError as exc:
-        raise FlighttestError(f"{out}: cannot write Parquet ({exc.strerror})") from None
+        raise FlighttestError(f"{out}: cannot write Parquet ({exc.strerror or exc})") from None
     return out

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from flighttest.analysis.schema import RATES, motor_columns
-from flighttest.errors import FlighttestError
+from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M, MAX_SPEED_MPS, Range
 
 METRICS = ["rate_rms_radps", "accz_rms_mps2", "motor_dtt"]
 NOISE_FLOOR = {"rate_rms_radps": 0.005, "accz_rms_mps2": 0.05, "motor_dtt": 0.005}
@@ -39,8 +39,17 @@ class FluctuationConfig:
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
-            if not (np.isfinite(value) and value > 0):
-                raise FlighttestError(f"fluctuation setting {name} must be a finite number > 0 (got {value})")
+            FLUCTUATION_RANGES[name].check(value, f"fluctuation setting {name}")
+
+
+# positive and physically bounded (as flighttest.inputs bounds durations, speeds and heights): a window
+# of 1e308 s would overflow into a sample count
+FLUCTUATION_RANGES: dict[str, Range] = {
+    "window_s": Range(0.0, MAX_DURATION_S, "s", lo_open=True),
+    "trend_s": Range(0.0, MAX_DURATION_S, "s", lo_open=True),
+    "hover_speed_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
+    "hover_min_height_m": Range(0.0, MAX_HEIGHT_M, "m", lo_open=True),
+}
 
 
 def _rolling_rms(x: np.ndarray, n: int, n_trend: int) -> np.ndarray:

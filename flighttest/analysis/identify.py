@@ -34,6 +34,25 @@ are correlated) combined with the speed resolution: the grid step and the
 speed change over the two telemetry periods the signal needs near the onset.
 An onset is reported only when the fitted fluctuation at the fastest descent flown is at least
 ``threshold_ratio`` times the hover's (in RMS); otherwise the probe never reached it.
+
+**Identify refuses to invent** (every later plan and flight would trust what it stores):
+
+- *Only a probe's sweep* (:func:`check_probe`). A flighttest log folder must say it flew the probe
+  (``meta.json`` mission, or the trajectory's kind) and hold the sweep: a ``stream`` phase in
+  ``setpoints.csv``, its ``events.jsonl`` (where an abort cut the sweep short), and telemetry
+  covering the sweep from start to end without a gap longer than ``MAX_SWEEP_GAP_S`` — a vertical or
+  helix folder, or a damaged probe folder, is :class:`NotAProbe`. Another program's log (``.tlog``,
+  ``.ulg``, ``.bin``) records no mission: it is taken as the probe the user says it is, and the fit
+  must then convince on its own (below).
+- *Physically plausible* (:func:`implausible`): strictly above the guard margin and a third of
+  Onera's straight-down VRS entry, at most 1.5× Onera's TWS entry
+  (:func:`flighttest.profiles.plausible_w_allow_range`: 0.045–0.62 v_h with the default ε), not at
+  the slowest descent fitted (a rise from the first descending sample is shaking that grows with
+  speed, not an onset), and known to within ``MAX_RELATIVE_UNCERTAINTY`` of itself — else
+  :class:`ImplausibleOnset`, one line saying why.
+- *No onset up to the top speed* (:class:`NoOnset`) is a result, not a failure: the sweep was flown
+  and stayed quiet up to ``lower_bound_mps``, so the onset lies above it; callers keep the prior
+  ``w_allow``.
 """
 
 from __future__ import annotations
@@ -51,7 +70,8 @@ from flighttest.analysis.fluctuation import FluctuationConfig, hover_mask
 from flighttest.analysis.pipeline import prepare_state
 from flighttest.analysis.schema import RATES, FlightLog
 from flighttest.errors import FlighttestError
-from flighttest.profiles import VehicleProfile
+from flighttest.inputs import shown
+from flighttest.profiles import VehicleProfile, plausible_w_allow_range
 
 PROBE_PHASES = ("settle", "stream")
 # Per-sample noise floors of the differenced signals: far below any real gyro's or accelerometer's
@@ -73,6 +93,140 @@ class IdentifyConfig:
     irls_iterations: int = 6
 
 
+MAX_RELATIVE_UNCERTAINTY = 0.25  # an onset known to worse than ±25 % of itself is not one to fly by
+MAX_SWEEP_GAP_S = 1.0  # a telemetry gap this long inside the sweep: the log is damaged, not a slow link
+
+
+class NotAProbe(FlighttestError):
+    """The log does not hold a probe flight's sweep (another mission, or a damaged probe folder)."""
+
+
+class ImplausibleOnset(FlighttestError):
+    """The fit found a rise the model cannot explain as a VRS onset for this vehicle: nothing to store."""
+
+
+class NoOnset(FlighttestError):
+    """The sweep was flown and its fluctuation stayed below ``threshold_ratio`` × hover: the onset lies above
+    ``lower_bound_mps`` (the speed the sweep reached with at least ``min_samples_above`` samples). A
+    result, not bad input: the prior ``w_allow`` stays. Its message keeps the words "no onset found"."""
+
+    def __init__(self, message: str, *, lower_bound_mps: float, v_h_mps: float, threshold_ratio: float,
+                 max_speed_mps: float, rise_ratio: float, samples: int, signals: tuple[str, ...],
+                 evidence: str) -> None:  # fmt: skip
+        super().__init__(message)
+        self.lower_bound_mps = lower_bound_mps
+        self.v_h_mps = v_h_mps
+        self.threshold_ratio = threshold_ratio
+        self.max_speed_mps = max_speed_mps
+        self.rise_ratio = rise_ratio
+        self.samples = samples
+        self.signals = signals
+        self.evidence = evidence
+
+    def summary(self) -> dict:
+        return {
+            "onset_found": False, "w_onset_mps": None, "uncertainty_mps": None,
+            "w_onset_lower_bound_mps": self.lower_bound_mps,
+            "w_onset_lower_bound_n": self.lower_bound_mps / self.v_h_mps, "v_h_mps": self.v_h_mps,
+            "threshold_ratio": self.threshold_ratio, "max_speed_mps": self.max_speed_mps,
+            "rise_ratio": self.rise_ratio, "samples": self.samples, "signals": list(self.signals),
+            "probe_evidence": self.evidence, "reason": str(self),
+        }  # fmt: skip
+
+
+def no_onset_line(lower_bound_mps: float, prior_mps: float) -> str:
+    """What ``identify`` and the campaign say when the probe stayed quiet up to its top speed. The prior
+    ``w_allow`` stays: a quiet sweep bounds the onset from below but does not locate it, and only a
+    located onset is stored."""
+    if prior_mps <= lower_bound_mps:
+        why = "the prior is conservative"
+    else:
+        why = "the sweep did not reach the prior, which stays unverified above that"
+    return (f"no onset up to {lower_bound_mps:.2f} m/s: w_allow stays at prior {prior_mps:.3f} m/s "
+            f"(it is at least {lower_bound_mps:.2f}; {why})")  # fmt: skip
+
+
+def _events_t(log: FlightLog, name: str) -> list[float]:
+    out = []
+    for e in log.events or []:
+        t = e.get("t_s")
+        if e.get("event") == name and isinstance(t, int | float) and not isinstance(t, bool) and math.isfinite(t):
+            out.append(float(t))
+    return out
+
+
+def check_probe(log: FlightLog) -> str:
+    """One line saying why this log can be fitted as a probe's sweep, or :class:`NotAProbe` saying why not
+    (module docstring: a flighttest folder must be a probe's and hold the whole sweep; another program's
+    log records no mission and is taken on the user's word)."""
+    if log.source != "flighttest-folder":
+        if log.path.name == "flight.tlog" and (log.path.parent / "meta.json").is_file():
+            # the tlog alone would hide what the folder says it flew
+            raise NotAProbe(f"{log.path}: the tlog of a flighttest log folder: give the folder "
+                            f"({log.path.parent}), which says which mission it flew")  # fmt: skip
+        return f"{log.source} log (no mission recorded): taken as the probe flight it was given as"
+    traj = log.meta.get("trajectory_meta")
+    kind = traj.get("kind") if isinstance(traj, dict) else None
+    mission = log.mission_name
+    if mission != "probe" and kind != "probe":
+        if mission is None and kind is None:
+            raise NotAProbe(f"{log.name}: the log folder does not say which mission it flew (no readable "
+                            "meta.json or trajectory.json): identify needs a probe flight's folder "
+                            "(flighttest fly probe)")  # fmt: skip
+        raise NotAProbe(f"{log.name}: a {shown(mission or kind)} flight, not a probe: identify needs the probe's "
+                        "sweep (flighttest fly probe)")  # fmt: skip
+    sp = log.setpoints
+    phase = sp["phase"].astype(str) if sp is not None and "phase" in sp and "t_s" in sp else None
+    t_sp = pd.to_numeric(sp["t_s"], errors="coerce").to_numpy(float) if phase is not None else np.array([])
+    stream = (phase == "stream").to_numpy() & np.isfinite(t_sp) if phase is not None else np.array([], bool)
+    if not stream.any():
+        raise NotAProbe(f"{log.name}: probe folder without its sweep (setpoints.csv has no 'stream' phase): "
+                        "damaged, or the sweep was never flown")  # fmt: skip
+    if not log.events:
+        raise NotAProbe(f"{log.name}: probe folder without events.jsonl: where the sweep ended (an abort) is "
+                        "unknown, so its samples cannot be told from the recovery's")  # fmt: skip
+    t0, t1 = float(t_sp[stream].min()), float(t_sp[stream].max())
+    aborts = [t for t in _events_t(log, "abort") if t >= t0]
+    if aborts:
+        t1 = min(t1, min(aborts))
+    t = log.state["t_s"].to_numpy(float)
+    t = t[np.isfinite(t)]
+    if not len(t) or t.max() < t1 - MAX_SWEEP_GAP_S or t.min() > t0 + MAX_SWEEP_GAP_S:
+        span = f"{t.min():.1f}–{t.max():.1f} s" if len(t) else "nothing"
+        raise NotAProbe(f"{log.name}: the telemetry covers {span}, not the sweep's {t0:.1f}–{t1:.1f} s "
+                        "(flight.tlog truncated or damaged)")  # fmt: skip
+    inside = np.sort(t[(t >= t0) & (t <= t1)])
+    edges = np.concatenate([[t0], inside, [t1]])
+    gaps = np.diff(edges)
+    k = int(np.argmax(gaps))
+    if gaps[k] > MAX_SWEEP_GAP_S:
+        raise NotAProbe(f"{log.name}: a {gaps[k]:.1f} s gap in the telemetry during the sweep (at {edges[k]:.1f} s): "
+                        "flight.tlog damaged")  # fmt: skip
+    return f"flighttest probe folder: the sweep {t0:.1f}–{t1:.1f} s" + (" (up to the abort)" if aborts else "")
+
+
+def implausible(w0_mps: float, unc_mps: float, profile: VehicleProfile, slowest_mps: float) -> list[str]:
+    """Why an onset of ``w0 ± unc`` cannot be this vehicle's VRS onset (empty: it can). ``slowest_mps``:
+    the first onset the grid tried (a fit that lands there found no quiet descent below the rise)."""
+    lo, hi = plausible_w_allow_range(profile)
+    why = []
+    if not (math.isfinite(w0_mps) and math.isfinite(unc_mps)):
+        return ["not a finite number"]
+    if w0_mps <= slowest_mps:
+        why.append(f"the rise starts at the slowest descent fitted ({slowest_mps:.2f} m/s): no quiet descent below it")
+    if w0_mps <= profile.vrs.margin_mps:
+        why.append(f"not above the guard margin {profile.vrs.margin_mps:.2f} m/s")
+    elif w0_mps <= lo:
+        why.append(f"below {lo:.3f} m/s, a third of Onera's VRS entry ({lo / profile.v_h_mps:.3f} v_h)")
+    if w0_mps > hi:
+        why.append(f"above {hi:.3f} m/s, 1.5× Onera's TWS entry ({hi / profile.v_h_mps:.3f} v_h)")
+    if unc_mps >= w0_mps:
+        why.append("its uncertainty is as large as the value")
+    elif unc_mps > MAX_RELATIVE_UNCERTAINTY * w0_mps:
+        why.append(f"its uncertainty is {unc_mps / w0_mps:.0%} of the value (at most {MAX_RELATIVE_UNCERTAINTY:.0%})")
+    return why
+
+
 @dataclass(frozen=True)
 class Onset:
     w_onset_mps: float
@@ -88,11 +242,13 @@ class Onset:
     resolution_mps: float
     signals: tuple[str, ...]
     bins: pd.DataFrame  # fluctuation power (data and fit) binned by speed, for plots and reports
+    probe_evidence: str = ""  # check_probe's line: why this log was taken as a probe's sweep
 
     def summary(self) -> dict:
         d = asdict(self)
         d.pop("bins")
         d["signals"] = list(self.signals)
+        d["onset_found"] = True
         return d
 
     def provenance(self, log_path: Path | str, by: str) -> str:
@@ -237,6 +393,7 @@ def _probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig)
 
 def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig | None = None) -> Onset:
     cfg = cfg or IdentifyConfig()
+    evidence = check_probe(log)  # before any fit: an onset comes only from a probe's sweep
     ps = _probe_samples(log, profile, cfg)
     t, w_all, y_all, use, dt, n_win = ps.t_s, ps.w_mps, ps.power, ps.use, ps.dt_s, ps.n_win
     descending = use & (w_all > cfg.min_speed_mps)
@@ -254,10 +411,15 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     w0, b0, b1, k = _onset_from(y, zs, grid, cfg.irls_iterations)
     rise = math.sqrt((b0 + b1 * max(w_top - w0, 0.0) ** 2) / b0) if math.isfinite(w0) else 1.0
     if not math.isfinite(w0) or rise < cfg.threshold_ratio:
-        raise FlighttestError(
-            f"{log.name}: fluctuation never rose above {cfg.threshold_ratio:g}× hover up to {w_top:.2f} m/s "
-            f"descent: no onset found (w_allow is at least that)"
-        )
+        # the lower bound: the speed at least min_samples_above quiet samples reached (one fast sample
+        # of noise in w must not raise it)
+        bound = float(min(hi, w_top))
+        raise NoOnset(
+            f"{log.name}: fluctuation never rose above {cfg.threshold_ratio:g}× hover up to {bound:.2f} m/s "
+            f"descent: no onset found (w_allow is at least that)",
+            lower_bound_mps=bound, v_h_mps=profile.v_h_mps, threshold_ratio=cfg.threshold_ratio,
+            max_speed_mps=w_top, rise_ratio=rise, samples=int(use.sum()), signals=ps.signals, evidence=evidence,
+        )  # fmt: skip
     # residual block bootstrap: the speeds flown stay as they were (the few samples past the onset
     # are the design, not something to resample away); the multiplicative scatter y/μ is resampled
     # in blocks of consecutive samples, which keeps its correlation
@@ -282,6 +444,10 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     lag_w = float(np.median(dw)) if len(dw) else 0.0
     resolution = math.sqrt(cfg.step_mps**2 / 12.0 + lag_w**2 / 3.0)
     unc = math.sqrt(boot_sd**2 + resolution**2)
+    why = implausible(w0, unc, profile, float(grid[0]))
+    if why:
+        raise ImplausibleOnset(f"{log.name}: onset {w0:.3f} ± {unc:.3f} m/s is not a plausible VRS onset for "
+                               f"{profile.name}: " + "; ".join(why) + " (nothing stored)")  # fmt: skip
     v_h = profile.v_h_mps
     return Onset(
         w_onset_mps=w0,
@@ -297,6 +463,7 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         resolution_mps=resolution,
         signals=ps.signals,
         bins=_bins(w_all[use], y, b0, b1, w0),
+        probe_evidence=evidence,
     )
 
 

@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from flighttest.analysis.compare import abort_time_s
+from flighttest.analysis.descent_time import TIMED_EVENT, is_abort_phase, timed_event
 from flighttest.analysis.exposure import EXPOSURE_COLUMNS, descent_exposure, velocity_track
 from flighttest.analysis.fluctuation import FluctuationConfig, fluctuation
 from flighttest.analysis.heights import HeightArbitration, HeightConfig, apply, arbitrate
@@ -76,7 +78,13 @@ def resolve_profile(log: FlightLog, vehicle: str | None) -> tuple[VehicleProfile
 
 def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
     """Mission, trajectory and phase of each descent (flighttest folders); what the live guard logged
-    inside it: samples it measured inside its region (``margin_mps < 0``) and the actions it took."""
+    inside it: samples it measured inside its region (``margin_mps < 0``) and the actions it took.
+
+    A descent that starts after the flight's abort began is phase ``"abort"`` unless the log names
+    the ladder's phase (``abort_recover|abort_hold|abort_land``: folders written before the ladder
+    logged its phases label PX4's Land after an abort ``stream``). The flight's descent is timed
+    again with :mod:`flighttest.analysis.descent_time` and that timing added to ``log.events`` as a
+    ``descent_timed`` event (in memory only; once, however often the log is analysed)."""
     traj = log.meta.get("trajectory_meta", {})
     kind = traj.get("kind") if isinstance(traj, dict) else None
     tpath = log.meta.get("trajectory")
@@ -92,6 +100,7 @@ def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
         for e in log.events
         if e.get("event") == "phase" and isinstance(e.get("t_s"), int | float) and "phase" in e
     )
+    t_abort = abort_time_s(log.events)
     for row in descents.itertuples():
         phase = None
         mid = 0.5 * (row.start_s + row.end_s)
@@ -102,6 +111,8 @@ def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
             inside = sp[(sp["t_s"] >= row.start_s) & (sp["t_s"] <= row.end_s)]
             if len(inside):
                 phase = str(inside["phase"].mode().iloc[0])
+        if t_abort is not None and row.start_s >= t_abort and not is_abort_phase(phase):
+            phase = "abort"
         phases.append(phase)
         if gd is not None and "t_s" in gd and "margin_mps" in gd:
             inside = gd[(gd["t_s"] >= row.start_s) & (gd["t_s"] <= row.end_s)]
@@ -115,6 +126,10 @@ def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
     descents["phase"] = phases
     descents["guard_inside_samples"] = inside_n
     descents["guard_actions"] = actions
+    log.events[:] = [e for e in log.events if e.get("event") != TIMED_EVENT]
+    timed = timed_event(log)
+    if timed is not None:
+        log.events.append(timed)
     return descents
 
 

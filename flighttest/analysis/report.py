@@ -85,7 +85,9 @@ def plot_altitude(a: Analysis, out: Path) -> Path:
     h = a.heights
     estimator = a.log.heights[0].name if a.log.heights else "estimator"
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, dpi=100)
-    trusted = f"height from {h.source} ({h.kind}, trusted)" if h is not None else "altitude (−d)"
+    trusted = "altitude (−d)"
+    if h is not None:
+        trusted = f"height from {h.source} ({h.kind}, trusted)" + (", glitches bridged" if h.bridged.any() else "")
     if _differs(s, "d_m", "d_est_m"):
         ax1.plot(s["t_s"], -s["d_est_m"], lw=1.0, ls="--", color="0.45", label=f"estimator {estimator} as logged")
     ax1.plot(s["t_s"], -s["d_m"], lw=1.2, color="tab:blue", label=trusted)

@@ -6,7 +6,10 @@ over ``settle_window_s`` before the stretch, its **end height** the median over 
 starting half a window after it (the tail is still creeping at the threshold). It **starts** when
 the height first falls ``start_tol_m`` below the start height and **ends** when the height comes
 within ``end_tol_m`` of the end height and stays there for ``settle_hold_s`` (so an overshoot or a
-bounce counts as part of the descent). Crossing times are interpolated between samples. All
+bounce counts as part of the descent). Crossing times are interpolated between samples, and the
+rate (the central difference of the height over ``smooth_s``) and the start/end heights (medians over
+time of the interpolated height) are defined in time rather than in samples, so one flight logged at
+different rates (PX4's 125 Hz ``.ulg``, our jittery 50 Hz ``.tlog``) gives the same descents. All
 thresholds live in :class:`SegmentConfig`.
 
 An **estimator glitch** is a sample whose altitude jumps away from its neighbours (more than
@@ -25,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from flighttest.errors import FlighttestError
+from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M, MAX_HORIZONTAL_M, MAX_SPEED_MPS, Range
 
 
 @dataclass(frozen=True)
@@ -44,8 +47,25 @@ class SegmentConfig:
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
-            if not (np.isfinite(value) and value > 0):
-                raise FlighttestError(f"segmentation threshold {name} must be a finite number > 0 (got {value})")
+            SEGMENT_RANGES[name].check(value, f"segmentation threshold {name}")
+
+
+# Every threshold is positive and physically bounded: an unbounded one overflowed into a sample count
+# (``settle_hold_s = 1e308`` → OverflowError). Heights, speeds and durations as flighttest.inputs
+# bounds them; a glitch speed may go to ten times any multicopter's (that turns the speed test off).
+SEGMENT_RANGES: dict[str, Range] = {
+    "rate_threshold_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
+    "min_height_m": Range(0.0, MAX_HEIGHT_M, "m", lo_open=True),
+    "merge_gap_s": Range(0.0, MAX_DURATION_S, "s", lo_open=True),
+    "smooth_s": Range(0.0, MAX_DURATION_S, "s", lo_open=True),
+    "settle_window_s": Range(0.0, MAX_DURATION_S, "s", lo_open=True),
+    "start_tol_m": Range(0.0, MAX_HEIGHT_M, "m", lo_open=True),
+    "end_tol_m": Range(0.0, MAX_HEIGHT_M, "m", lo_open=True),
+    "settle_hold_s": Range(0.0, MAX_DURATION_S, "s", lo_open=True),
+    "glitch_jump_m": Range(0.0, MAX_HORIZONTAL_M, "m", lo_open=True),
+    "glitch_window_s": Range(0.0, MAX_DURATION_S, "s", lo_open=True),
+    "glitch_speed_mps": Range(0.0, 10 * MAX_SPEED_MPS, "m/s", lo_open=True),
+}
 
 
 def _samples(t: np.ndarray, seconds: float) -> int:

@@ -39,11 +39,12 @@ def _name(a: Analysis) -> str:
 
 
 def main_descent(a: Analysis, role: str) -> pd.Series:
-    """The flight's main descent: as flown, rest to rest, where the log says (``flown_descent``), else
-    the segmenter's (``primary_descent``); a one-line error when there is none."""
+    """The flight's main descent: as flown, from the stream start to the end height settled
+    (``flown_descent``), else the segmenter's (``primary_descent``, never the abort ladder's); a
+    one-line error when there is none."""
     d = flown_descent(a.log.events)
     if d is None:
-        d = primary_descent(a.descents)
+        d = primary_descent(a.descents, a.log.events)
     if d is None:
         raise FlighttestError(f"{role} flight {_name(a)}: no descent found, nothing to compare")
     return d

@@ -1,7 +1,9 @@
 """What each campaign step does, reading the files earlier steps wrote and returning what it wrote.
 
 Steps raise :class:`StepFailed` when the vehicle did not do what the step needs (an aborted
-flight, no onset in the probe's data); the campaign stops there and the step runs again on resume.
+flight, a probe log identify cannot use); the campaign stops there and the step runs again on resume.
+A probe that stayed quiet up to its top speed is a result, not a failure: identify records that lower
+bound, the campaign's profile keeps the prior ``w_allow`` and the campaign goes on with it.
 """
 
 from __future__ import annotations
@@ -15,13 +17,15 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import tomli_w
 
 from flighttest.campaign.state import CampaignDir, CampaignState
 from flighttest.errors import FlighttestError
 from flighttest.flightlog import write_json_atomic
+from flighttest.inputs import atomic_write
 from flighttest.mission_scripts import MISSIONS, load_mission_module, mission_config_path
-from flighttest.missions_config import MissionConfig, load_mission_config
-from flighttest.profiles import VehicleProfile, load_profile, write_w_allow
+from flighttest.missions_config import DESCENT_KEYS, MissionConfig, load_mission_config
+from flighttest.profiles import VehicleProfile, load_profile, profile_to_dict, write_w_allow
 from flighttest.trajectory import Trajectory
 
 FLIGHT_OK = {"probe": ("probe_stopped", "completed"), "vertical": ("completed",), "helix": ("completed",)}
@@ -76,9 +80,10 @@ def write_configs(d: CampaignDir) -> None:
         text = src.read_text(encoding="utf-8")
         if mission == "vertical":
             same = "  # = the helix's, like for like"
-            h0, dh = helix.flight.start_height_m, float(helix.plan["descent_m"])
+            h0, dh = helix.flight.start_height_m, float(helix.plan[DESCENT_KEYS["helix"]])
+            key = DESCENT_KEYS["vertical"]  # the [plan] key `fly --descent` sets
             text = re.sub(r"(?m)^start_height_m\s*=.*$", f"start_height_m = {h0!r}{same}", text)
-            text = re.sub(r"(?m)^descent_m\s*=.*$", f"descent_m = {dh!r}{same}", text)
+            text = re.sub(rf"(?m)^{key}\s*=.*$", f"{key} = {dh!r}{same}", text)
         dst.write_text(text, encoding="utf-8")
     for mission in MISSIONS:  # validate now, before anything flies
         load_mission_config(d.config / mission_config_path(mission).name)
@@ -97,7 +102,8 @@ def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfi
     # log_dir is None when nothing answered (the flight left no folder)
     aborts = guard_aborts(Path(out.log_dir)) if out.log_dir else 0
     rec = {"log_dir": out.log_dir, "outcome": out.outcome, "abort_reason": out.abort_reason,
-           "descent_time_s": out.descent_time_s, "guard_aborts": aborts}  # fmt: skip
+           "descent_time_s": out.descent_time_s, "horizontal_error_m": out.extra.get("horizontal_error_m"),
+           "guard_aborts": aborts}  # fmt: skip
     if out.outcome not in FLIGHT_OK[step]:
         why = out.abort_reason or "no reason given"
         raise StepFailed(f"{step} flight {out.outcome}: {why}" + (f" (log {out.log_dir})" if out.log_dir else ""), rec)
@@ -120,30 +126,45 @@ def run_probe(ctx: StepContext) -> dict[str, Any]:
     return _fly(ctx, "probe", profile, cfg, traj)
 
 
+def _keep_profile(profile: VehicleProfile, target: Path) -> None:
+    """The campaign's copy of the profile as it is, prior ``w_allow`` and all: plan, flights and report
+    read the profile from there whatever identify found."""
+    with atomic_write(target) as tmp:
+        tmp.write_text(tomli_w.dumps(profile_to_dict(profile)), encoding="utf-8")
+
+
 def run_identify(ctx: StepContext) -> dict[str, Any]:
-    from flighttest.analysis.identify import identify_onset
+    from flighttest.analysis.identify import NoOnset, identify_onset, no_onset_line
     from flighttest.analysis.loaders import load_log
 
     profile = load_profile(ctx.vehicle)
     log_dir = ctx.state.path("probe", "log_dir")
+    target = ctx.dir.vehicles / f"{profile.name}.toml"
+    prior = profile.w_allow_mps
+    base = {"probe_log": str(log_dir), "vehicle": profile.name, "prior_w_allow_mps": prior}
     try:
         onset = identify_onset(load_log(log_dir), profile)
-    except FlighttestError as exc:
-        raise StepFailed(f"no VRS onset in the probe's log {log_dir}: {exc}") from None
-    target = ctx.dir.vehicles / f"{profile.name}.toml"
+    except NoOnset as none:  # quiet up to the top speed: the onset lies above it; fly by the prior
+        line = no_onset_line(none.lower_bound_mps, prior)
+        _keep_profile(profile, target)
+        write_json_atomic(ctx.dir.identify_file, {**base, **none.summary(), "profile": str(target), "message": line})
+        return {"onset_found": False, "w_onset_mps": None, "uncertainty_mps": None,
+                "w_onset_lower_bound_mps": none.lower_bound_mps, "prior_w_allow_mps": prior,
+                "profile": str(target), "identify_json": str(ctx.dir.identify_file), "message": line}  # fmt: skip
+    except FlighttestError as exc:  # not a probe's sweep, damaged, too few samples, implausible
+        raise StepFailed(f"cannot identify the onset from the probe's log {log_dir}: {exc}") from None
     write_w_allow(profile, onset.w_onset_mps, onset.provenance(log_dir, "flighttest campaign"), target=target)
-    summary = {"probe_log": str(log_dir), "vehicle": profile.name, "prior_w_allow_mps": profile.w_allow_mps,
-               **onset.summary(), "profile": str(target)}  # fmt: skip
-    write_json_atomic(ctx.dir.identify_file, summary)
-    return {"w_onset_mps": onset.w_onset_mps, "uncertainty_mps": onset.uncertainty_mps,
-            "prior_w_allow_mps": profile.w_allow_mps, "profile": str(target),
+    write_json_atomic(ctx.dir.identify_file, {**base, **onset.summary(), "profile": str(target)})
+    return {"onset_found": True, "w_onset_mps": onset.w_onset_mps, "uncertainty_mps": onset.uncertainty_mps,
+            "w_onset_lower_bound_mps": None, "prior_w_allow_mps": prior, "profile": str(target),
             "identify_json": str(ctx.dir.identify_file)}  # fmt: skip
 
 
 def run_plan(ctx: StepContext) -> dict[str, Any]:
     profile = ctx.identified_profile()
     ctx.dir.plans.mkdir(parents=True, exist_ok=True)
-    out: dict[str, Any] = {"w_allow_mps": profile.w_allow_mps}
+    found = ctx.state.steps["identify"].outputs.get("onset_found", True)  # older records: always found
+    out: dict[str, Any] = {"w_allow_mps": profile.w_allow_mps, "w_allow_from": "identified" if found else "prior"}
     for mission in ("vertical", "helix"):
         traj = load_mission_module(mission).plan(profile, ctx.config(mission))
         path = ctx.dir.plans / f"{mission}.csv"

@@ -7,6 +7,7 @@ same figures for scripts; ``compare.csv`` is ``flighttest compare`` of the two d
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
@@ -16,6 +17,7 @@ import pandas as pd
 
 from flighttest import __version__
 from flighttest.analysis.compare import add_speedup, compare_row
+from flighttest.analysis.descent_time import DescentRule
 from flighttest.campaign.state import STEPS, CampaignState
 from flighttest.errors import FlighttestError
 from flighttest.flightlog import write_json_atomic
@@ -26,8 +28,9 @@ FLIGHTS = ("probe", "vertical", "helix")
 DESCENTS = ("vertical", "helix")
 ROWS = (  # the summary table, one column per descent: label, key, format
     ("outcome", "outcome", "{}"),
-    ("descent time s (rest to rest)", "descent_time_s", "{:.2f}"),
+    ("descent time s (stream start → end height, settled)", "descent_time_s", "{:.2f}"),
     ("speed-up × (vertical / this)", "speedup_vs_vertical", "{:.2f}"),
+    ("horizontal error at that instant m", "horizontal_error_m", "{:.2f}"),
     ("height m", "height_m", "{:.2f}"),
     ("descending s (log segment)", "duration_s", "{:.2f}"),
     ("mean descent rate m/s", "mean_rate_mps", "{:.2f}"),
@@ -51,6 +54,8 @@ def campaign_summary(state: CampaignState, profile: VehicleProfile, rows: dict[s
     """Everything the summary says, as JSON-able data (also what ``flighttest campaign --json`` prints)."""
     ident = state.steps["identify"].outputs
     vert, helix = rows.get("vertical", {}), rows.get("helix", {})
+    found = ident.get("onset_found", ident.get("w_onset_mps") is not None if ident else None)  # older records
+    profile_path, probe_log = state.maybe_path("identify", "profile"), state.maybe_path("probe", "log_dir")
     return {
         "vehicle": profile.name,
         "v_h_mps": profile.v_h_mps,
@@ -58,25 +63,57 @@ def campaign_summary(state: CampaignState, profile: VehicleProfile, rows: dict[s
         "identified_w_allow_mps": ident.get("w_onset_mps"),
         "identified_uncertainty_mps": ident.get("uncertainty_mps"),
         "prior_w_allow_mps": ident.get("prior_w_allow_mps"),
-        "identified_profile": str(state.maybe_path("identify", "profile")),
+        # false: the probe stayed quiet up to the lower bound and the flights used the prior w_allow
+        "onset_found": found,
+        "w_onset_lower_bound_mps": ident.get("w_onset_lower_bound_mps"),
+        "identified_profile": str(profile_path) if profile_path else None,
         "vertical_descent_s": vert.get("descent_time_s"),
         "helix_descent_s": helix.get("descent_time_s"),
         "speedup_helix_vs_vertical": helix.get("speedup_vs_vertical"),
         "flights": [rows[s] for s in DESCENTS if s in rows],
-        "probe_log": str(state.maybe_path("probe", "log_dir")),
+        "probe_log": str(probe_log) if probe_log else None,
         "steps_elapsed_s": {s: state.steps[s].elapsed_s for s in STEPS},
         "report": str(state.dir.report),
         "flighttest_version": __version__,
     }
 
 
+def known_summary(state: CampaignState, profile: VehicleProfile) -> dict[str, Any]:
+    """The summary's keys filled from what ``campaign.json`` knows so far, analysing no log (a stop can
+    come before any flight): what ``campaign --json`` prints when it ends before the report, with each
+    step's status under ``steps``. Flights carry their step's outputs, not the compare columns."""
+    rows: dict[str, dict[str, Any]] = {}
+    for step in DESCENTS:
+        o = state.steps[step].outputs
+        if o:
+            rows[step] = {"step": step, "status": state.steps[step].status, "outcome": o.get("outcome"),
+                          "guard_aborts": o.get("guard_aborts"), "descent_time_s": o.get("descent_time_s"),
+                          "horizontal_error_m": o.get("horizontal_error_m"), "log_dir": o.get("log_dir")}  # fmt: skip
+    t_v, t_h = (rows.get(d, {}).get("descent_time_s") for d in DESCENTS)
+    if isinstance(t_v, int | float) and isinstance(t_h, int | float) and t_h > 0:
+        rows["helix"]["speedup_vs_vertical"] = t_v / t_h
+    out = campaign_summary(state, profile, rows)
+    out["report"] = str(state.dir.report) if state.done("report") else None
+    out["steps"] = {s: state.steps[s].status for s in STEPS}
+    return out
+
+
 def headlines(s: dict) -> list[str]:
-    """The two sentences a flight-test report opens with: the onset found, and the time saved."""
+    """The two sentences a flight-test report opens with: the onset found (or how far the probe went
+    without one, and the prior the flights used), and the time saved."""
     onset_n = s["identified_w_allow_mps"] / s["v_h_mps"] if s["identified_w_allow_mps"] else None
+    bound = s.get("w_onset_lower_bound_mps")
+    if s.get("onset_found") is False and bound is not None:
+        first = (f"no onset found up to {bound:.2f} m/s ({bound / s['v_h_mps']:.3f} v_h; v_h {s['v_h_mps']:.2f} m/s): "
+                 f"w_allow kept at the prior {cell(s, 'prior_w_allow_mps', '{:.3f}')} m/s, which the plans and "
+                 "the guard used")  # fmt: skip
+    else:
+        first = (f"VRS onset from the probe: {cell(s, 'identified_w_allow_mps', '{:.3f}')} ± "
+                 f"{cell(s, 'identified_uncertainty_mps', '{:.3f}')} m/s "
+                 f"({cell({'n': onset_n}, 'n', '{:.3f}')} v_h; v_h {s['v_h_mps']:.2f} m/s; "
+                 f"the profile said {cell(s, 'prior_w_allow_mps', '{:.3f}')} m/s)")  # fmt: skip
     return [
-        f"VRS onset from the probe: {cell(s, 'identified_w_allow_mps', '{:.3f}')} ± "
-        f"{cell(s, 'identified_uncertainty_mps', '{:.3f}')} m/s ({cell({'n': onset_n}, 'n', '{:.3f}')} v_h; "
-        f"v_h {s['v_h_mps']:.2f} m/s; the profile said {cell(s, 'prior_w_allow_mps', '{:.3f}')} m/s)",
+        first,
         f"over the same height the helix took {cell(s, 'helix_descent_s', '{:.2f}')} s against the vertical "
         f"baseline's {cell(s, 'vertical_descent_s', '{:.2f}')} s: "
         f"{cell(s, 'speedup_helix_vs_vertical', '{:.2f}')}× as fast",
@@ -99,11 +136,15 @@ def summary_markdown(summary: dict) -> str:
         "|---|---:|---:|",
     ]
     lines += [f"| {q} | {v} | {h} |" for q, v, h in table_rows(summary)]
+    notes = [f"- {f['step']}: {f['main_descent_note']}" for f in summary["flights"] if f.get("main_descent_note")]
+    lines += ["", *notes] if notes else []
     lines += [
         "",
-        "Descent time: from the first setpoint of the planned descent until the vehicle is at rest within",
-        "0.2 m of its end point (the paper's t_f); the figures show that span. Log segment: the main descent",
-        "found in each flight's log (`flighttest compare`). Inside/near: time with the blade-frame velocity inside /",
+        "Descent time: from the first setpoint of the planned descent until the vehicle is at its end point's",
+        f"height with its vertical speed settled ({DescentRule().describe()}; the vertical axis only: the",
+        "horizontal error at that instant is in the table). The figures show that span. Log segment: the main",
+        "descent found in each flight's log (`flighttest compare`), never one the abort ladder flew (PX4's Land",
+        "after an abort). Inside/near: time with the blade-frame velocity inside /",
         "within the margin of the guard region; guard aborts: the live guard's abort orders (`guard.csv`).",
         "Every flight in detail, the probe's fluctuation plot with the onset: [report.md](report.md).",
         "",
@@ -117,7 +158,7 @@ def summary_markdown(summary: dict) -> str:
 
 def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict[str, Any]:
     """Analyse the campaign's flights and write every file of ``REPORT_FILES`` into ``DIR/report``."""
-    from flighttest.analysis.identify import identify_onset
+    from flighttest.analysis.identify import NoOnset, identify_onset
     from flighttest.analysis.loaders import load_log
     from flighttest.analysis.pipeline import analyse
     from flighttest.analysis.report import write_report
@@ -141,7 +182,9 @@ def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict
     pd.DataFrame([rows[s] for s in DESCENTS]).to_csv(out_dir / "compare.csv", index=False)
     onsets = {}
     if "probe" in analyses:
-        onsets[str(analyses["probe"].log.path)] = identify_onset(analyses["probe"].log, profile)
+        # no onset: the probe's plot says "no onset identified up to …", the summary that the prior was kept
+        with contextlib.suppress(NoOnset):
+            onsets[str(analyses["probe"].log.path)] = identify_onset(analyses["probe"].log, profile)
     write_report(list(analyses.values()), out_dir, onsets)
     plot_tracks_velocity_space(analyses["vertical"], analyses["helix"], out_dir / "velocity_space.png",
                                probe=analyses.get("probe"))  # fmt: skip

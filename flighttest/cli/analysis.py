@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import math
+import os
+import stat
 import sys
 from pathlib import Path
 
@@ -15,6 +18,9 @@ from rich.text import Text
 from flighttest.analysis.compare import add_param_differences, add_speedup, compare_row
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
+from flighttest.inputs import FINITE, Range, atomic_write, check_output_path, check_path_text
+
+JOBS = Range(1, 256, integer=True)  # worker processes (flighttest.analysis.batch.MAX_JOBS)
 
 SEG_OPTIONS = {  # option → SegmentConfig field
     "rate_threshold": "rate_threshold_mps",
@@ -26,12 +32,14 @@ SEG_OPTIONS = {  # option → SegmentConfig field
 
 
 def _add_segment_options(p: argparse.ArgumentParser) -> None:
+    # finite here; each one's physical range (segment.SEGMENT_RANGES) is checked by _seg_config, so the
+    # error names both the option and the threshold it sets
     g = p.add_argument_group("descent segmentation (flighttest.analysis.segment)")
-    g.add_argument("--rate-threshold", type=float, metavar="MPS", help="a descent falls faster than this (0.15)")
-    g.add_argument("--min-height", type=float, metavar="M", help="smaller drops are not descents (0.5)")
-    g.add_argument("--start-tol", type=float, metavar="M", help="starts this far below the start height (0.05)")
-    g.add_argument("--end-tol", type=float, metavar="M", help="ends within this of the end height (0.10)")
-    g.add_argument("--settle-hold", type=float, metavar="S", help="... for at least this long (0.5)")
+    g.add_argument("--rate-threshold", type=FINITE, metavar="MPS", help="a descent falls faster than this (0.15)")
+    g.add_argument("--min-height", type=FINITE, metavar="M", help="smaller drops are not descents (0.5)")
+    g.add_argument("--start-tol", type=FINITE, metavar="M", help="starts this far below the start height (0.05)")
+    g.add_argument("--end-tol", type=FINITE, metavar="M", help="ends within this of the end height (0.10)")
+    g.add_argument("--settle-hold", type=FINITE, metavar="S", help="... for at least this long (0.5)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -42,33 +50,36 @@ def register(sub: argparse._SubParsersAction) -> None:
         "A folder that is not itself a flight log is walked for logs of every format, analysed on every "
         "core, and its per-descent table written as Parquet.",
     )
-    pa.add_argument("logs", nargs="+", type=Path, metavar="LOG|DIR")
+    pa.add_argument("logs", nargs="+", metavar="LOG|DIR")  # text: Path("") would be the current folder
     pa.add_argument("--vehicle", metavar="NAME", help="vehicle profile (default: the one in the log's meta.json)")
-    pa.add_argument("--json", action="store_true", help="per log, its descents and what was missing, as JSON")
-    pa.add_argument("--csv", type=Path, metavar="FILE", help="write the per-descent table as CSV")
+    pa.add_argument(
+        "--json",
+        action="store_true",
+        help='per log, its descents and what was missing, as JSON (a log that failed: {"log", "error"})',
+    )
+    pa.add_argument("--csv", metavar="FILE", help="write the per-descent table as CSV")
     pa.add_argument(
         "--parquet",
-        type=Path,
         metavar="FILE",
         help="where to write the per-descent Parquet table (default DIR/flighttest-descents.parquet "
         "when a folder is walked)",
     )
-    pa.add_argument("--jobs", type=int, metavar="N", help="worker processes (default: every core)")
+    pa.add_argument("--jobs", type=JOBS, metavar="N", help="worker processes (default: every core)")
     pa.add_argument("--wide", action="store_true", help="every column, however narrow the terminal")
     _add_segment_options(pa)
     pa.set_defaults(func=cmd_analyse)
 
     pc = sub.add_parser("compare", help="descent times side by side, speed-up ratio and VRS exposure")
-    pc.add_argument("logs", nargs="+", type=Path, metavar="LOG")
+    pc.add_argument("logs", nargs="+", metavar="LOG")
     pc.add_argument("--vehicle", metavar="NAME", help="vehicle profile (default: from each log)")
-    pc.add_argument("--json", action="store_true", help="machine-readable output")
+    pc.add_argument("--json", action="store_true", help='machine-readable output (a log that failed: {"log", "error"})')
     pc.add_argument("--wide", action="store_true", help="one row per flight, however narrow the terminal")
     _add_segment_options(pc)
     pc.set_defaults(func=cmd_compare)
 
     pr = sub.add_parser("report", help="PNG plots and a Markdown summary of flight logs")
-    pr.add_argument("logs", nargs="+", type=Path, metavar="LOG")
-    pr.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="folder for report.md and PNGs")
+    pr.add_argument("logs", nargs="+", metavar="LOG")
+    pr.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for report.md and PNGs")
     pr.add_argument("--vehicle", metavar="NAME", help="vehicle profile (default: from each log)")
     _add_segment_options(pr)
     pr.set_defaults(func=cmd_report)
@@ -98,10 +109,49 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _seg_config(args: argparse.Namespace):
-    from flighttest.analysis.segment import SegmentConfig
+    from flighttest.analysis.segment import SEGMENT_RANGES, SegmentConfig
 
     given = {f: getattr(args, o) for o, f in SEG_OPTIONS.items() if getattr(args, o, None) is not None}
+    for option, field in SEG_OPTIONS.items():
+        if field in given:
+            SEGMENT_RANGES[field].check(given[field], f"--{option.replace('_', '-')} ({field})")
     return SegmentConfig(**given)
+
+
+def _log_paths(paths: list[str]) -> list[Path]:
+    """The command line's logs, each checked before any is read: a path that is empty (it would be
+    the current folder), too long, missing, a FIFO (reading it blocks for ever) or a device is one
+    error line for the whole command; a log whose content is damaged is found when it is read."""
+    from flighttest.analysis.loaders import check_log_path
+
+    return [check_log_path(p) for p in paths]
+
+
+_FILE_SUFFIXES = (".md", ".png", ".pdf", ".svg", ".html", ".txt", ".json", ".csv")
+
+
+def _check_output_folder(path: str, what: str) -> Path:
+    """An output *folder* (report -o) checked before any log is read: not empty, not a file, not
+    under a file, writable, not named like a file (report.md goes inside it). Created when written."""
+    folder = Path(check_path_text(path, what))
+    if folder.suffix.lower() in _FILE_SUFFIXES:
+        raise FlighttestError(f"{what} {path}: names a file; give the folder for report.md and the PNGs")
+    try:
+        st = os.stat(folder)
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        if exc.errno == errno.ENOTDIR:
+            st = None  # a file on the way: check_output_path below says which
+        else:
+            raise FlighttestError(f"{what} {path}: {exc.strerror or exc}") from None
+    if st is not None and not stat.S_ISDIR(st.st_mode):
+        raise FlighttestError(f"{what} {path}: is a file, not a folder")
+    try:  # the folders on the way: a file among them, one not writable
+        check_output_path(folder / "report.md", what)
+    except FlighttestError as exc:
+        raise FlighttestError(str(exc).replace(str(folder / "report.md"), path, 1)) from None
+    return folder
 
 
 def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
@@ -111,7 +161,7 @@ def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
 
     logs: list[Path] = []
     walked: list[Path] = []
-    for p in paths:
+    for p in _log_paths(paths):
         if p.is_dir() and not is_log_folder(p):
             found = find_logs(p)
             if not found:
@@ -126,8 +176,6 @@ def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
 def _run(paths: list[Path], vehicle: str | None, seg, jobs: int | None = None):
     from flighttest.analysis.batch import analyse_many
 
-    if jobs is not None and jobs < 1:
-        raise FlighttestError(f"--jobs must be ≥ 1 (got {jobs})")
     if vehicle:
         from flighttest.profiles import load_profile
 
@@ -136,7 +184,14 @@ def _run(paths: list[Path], vehicle: str | None, seg, jobs: int | None = None):
     errors = [err for _, _, err in results if err]
     for err in errors:
         print(f"flighttest: error: {err}", file=sys.stderr)
-    return [r for _, r, _ in results if r is not None], errors
+    return [r for _, r, _ in results if r is not None], errors, results
+
+
+def _in_input_order(results: list, entries: list[dict]) -> list[dict]:
+    """``entries`` (one per log analysed, in order) with ``{"log", "error"}`` where a log failed, so
+    ``--json`` stays one document with one entry per log whatever failed (docs/CONTRACTS.md)."""
+    done = iter(entries)
+    return [next(done) if r is not None else {"log": path, "error": err} for path, r, err in results]
 
 
 def _num(v, fmt: str = "{:.2f}") -> str:
@@ -172,11 +227,13 @@ def _print_table(table: Table) -> None:
 
 
 def _row_table(title: str | None, headers: list[str], rows: list[list[str]], left: tuple[str, ...] = ()) -> Table:
+    # every header and cell as Text: log names and missions come from the logs, and a "[/x]" in them
+    # would be taken for rich markup (a MarkupError, or text silently styled away)
     t = Table(title=Text(title) if title else None, title_justify="left")
     for h in headers:
-        t.add_column(h, justify="left" if h in left else "right", no_wrap=True)
+        t.add_column(Text(h), justify="left" if h in left else "right", no_wrap=True)
     for r in rows:
-        t.add_row(*r)
+        t.add_row(*(Text(c) for c in r))
     return t
 
 
@@ -201,12 +258,12 @@ def _stacked_tables(
 
 
 def _stacked(title: str | None, labels: list[str], columns: list[tuple[str, list[str]]]) -> Table:
-    t = Table(title=title, title_justify="left")
+    t = Table(title=Text(title) if title else None, title_justify="left")
     t.add_column("", no_wrap=True)
     for header, _ in columns:
-        t.add_column(header, justify="right", no_wrap=True)
+        t.add_column(Text(header), justify="right", no_wrap=True)
     for k, label in enumerate(labels):
-        t.add_row(label, *(values[k] for _, values in columns))
+        t.add_row(Text(label), *(Text(values[k]) for _, values in columns))
     return t
 
 
@@ -270,14 +327,22 @@ def _print_all(renderables: list) -> None:
 
 
 def cmd_analyse(args: argparse.Namespace) -> int:
-    from flighttest.analysis.batch import PARQUET_NAME, write_parquet
+    from flighttest.analysis.batch import PARQUET_NAME, descent_table, write_parquet
 
     seg = _seg_config(args)
+    # outputs before any log is read: a path that cannot be written is refused, not found out at the end
+    csv = check_output_path(args.csv, "--csv", (".csv",)) if args.csv is not None else None
+    parquet = check_output_path(args.parquet, "--parquet", (".parquet",)) if args.parquet is not None else None
     logs, walked = _expand(args.logs)
-    results, errors = _run(logs, args.vehicle, seg, args.jobs)
+    if parquet is None and walked:
+        try:  # the default beside the walked folder: where it cannot be written, analyse without it
+            parquet = check_output_path(walked[0] / PARQUET_NAME, "the Parquet table", (".parquet",))
+        except FlighttestError as exc:
+            print(f"flighttest: warning: not writing {exc}", file=sys.stderr)
+    results, errors, outcome = _run(logs, args.vehicle, seg, args.jobs)
     tables = [r["descents"] for r in results]
     if args.json:
-        print_json([r["summary"] for r in results])
+        print_json(_in_input_order(outcome, [r["summary"] for r in results]))
     else:
         for r in results:
             s = r["summary"]
@@ -286,25 +351,23 @@ def cmd_analyse(args: argparse.Namespace) -> int:
             _print_sources(s)
             for g in s["glitches"]:
                 console.print(Text(_glitch_line(g)))
+            # markup off: notes quote the log's own bytes, and "[/x]" in them would be taken for rich markup
             for k, v in s["missing"].items():
-                console.print(f"  missing {k}: {v}")
+                console.print(f"  missing {k}: {v}", markup=False)
             for n in s["notes"]:
-                console.print(f"  note: {n}")
-    if args.csv:
-        df = (
-            pd.concat([t for t in tables if len(t)], ignore_index=True)
-            if any(len(t) for t in tables)
-            else pd.DataFrame()
-        )
+                console.print(f"  note: {n}", markup=False)
+    if csv is not None:
+        df = descent_table(tables) if any(len(t) for t in tables) else pd.DataFrame()
         try:
-            df.to_csv(args.csv, index=False)
+            with atomic_write(csv) as tmp:
+                df.to_csv(tmp, index=False)
         except OSError as exc:
-            raise FlighttestError(f"{args.csv}: cannot write CSV ({exc.strerror})") from None
-    parquet = args.parquet or (walked[0] / PARQUET_NAME if walked else None)
+            raise FlighttestError(f"{csv}: cannot write CSV ({exc.strerror or exc})") from None
     if parquet is not None:
         out = write_parquet(tables, parquet)
         if not args.json:
-            console.print(f"wrote {out} ({sum(len(t) for t in tables)} descents from {len(results)} logs)")
+            n = sum(len(t) for t in tables)
+            console.print(f"wrote {out} ({n} descents from {len(results)} logs)", markup=False)
     return 2 if errors else 0
 
 
@@ -342,7 +405,8 @@ COMPARE_COLUMNS = {  # header: (key, format)
     "outcome": ("outcome", "{}"),
     "height m": ("height_m", "{:.2f}"),
     "duration s": ("duration_s", "{:.2f}"),
-    "rest-to-rest s": ("descent_time_s", "{:.2f}"),
+    "descent s": ("descent_time_s", "{:.2f}"),
+    "horiz. err m": ("horizontal_error_m", "{:.2f}"),
     "speed-up ×": ("speedup_vs_first", "{:.2f}"),
     "mean m/s": ("mean_rate_mps", "{:.2f}"),
     "max m/s": ("max_rate_mps", "{:.2f}"),
@@ -412,7 +476,8 @@ def param_difference_tables(rows: list[dict], headers: list[str], wide: bool = F
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    results, errors = _run(args.logs, args.vehicle, _seg_config(args))
+    seg = _seg_config(args)
+    results, errors, outcome = _run(_log_paths(args.logs), args.vehicle, seg)
     rows = [
         compare_row(
             r["summary"]["log"], r["descents"], r["events"], r.get("meta") or {}, r["summary"].get("params") or {}
@@ -425,13 +490,17 @@ def cmd_compare(args: argparse.Namespace) -> int:
         row["speedup_basis"] = basis
     add_param_differences(rows)
     if args.json:
-        print_json(rows)
+        print_json(_in_input_order(outcome, rows))  # speed-ups are against the first log analysed
     else:
         _print_all(compare_tables(rows, wide=args.wide))
+        for row in rows:
+            if row.get("main_descent_note"):
+                console.print(f"{Path(row['log']).name}: {row['main_descent_note']}", markup=False)
         console.print(
-            "duration: the main descent found in the log; rest-to-rest: flighttest's own logs, from the first "
-            "setpoint of the descent to rest at its end point; speed-up × = the first log's "
-            f"{'rest-to-rest time' if basis == 'descent_time_s' else 'duration'} / this one's"
+            "duration: the main descent found in the log (never one the abort ladder flew); descent: flighttest's "
+            "own logs, from the first setpoint of the descent until at its end height with the vertical speed "
+            "settled, horiz. err: off the end point sideways then; speed-up × = the first log's "
+            f"{'descent time' if basis == 'descent_time_s' else 'duration'} / this one's"
         )
     return 2 if errors else 0
 
@@ -442,47 +511,95 @@ def _is_probe(a) -> bool:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
+    from flighttest.analysis.batch import quiet_numerics
     from flighttest.analysis.identify import identify_onset
     from flighttest.analysis.loaders import load_log
     from flighttest.analysis.pipeline import analyse
     from flighttest.analysis.report import write_report
 
     seg = _seg_config(args)
+    output = _check_output_folder(args.output, "report -o")
+    paths = _log_paths(args.logs)
+    if args.vehicle:
+        from flighttest.profiles import load_profile
+
+        load_profile(args.vehicle)  # a bad profile is one error, not one per log
     analyses, onsets, failed = [], {}, 0
-    for path in args.logs:
+    for path in paths:
         try:
-            a = analyse(load_log(path), args.vehicle, seg)
+            with quiet_numerics():
+                a = analyse(load_log(path), args.vehicle, seg)
         except FlighttestError as exc:
             print(f"flighttest: error: {exc}", file=sys.stderr)
             failed += 1
             continue
+        except Exception as exc:  # one log's failure is one line, and the others are still reported
+            print(f"flighttest: error: {path}: analysis failed ({_detail(exc)})", file=sys.stderr)
+            failed += 1
+            continue
         if a.profile is not None and _is_probe(a):
             try:
-                onsets[str(a.log.path)] = identify_onset(a.log, a.profile)
+                with quiet_numerics():
+                    onsets[str(a.log.path)] = identify_onset(a.log, a.profile)
             except FlighttestError as exc:
                 a.notes.append(f"onset not identified: {exc}")
+            except Exception as exc:
+                a.notes.append(f"onset not identified: identification failed ({_detail(exc)})")
         analyses.append(a)
     if analyses:
-        out = write_report(analyses, args.output, onsets)
-        console.print(f"wrote {out}")
+        try:
+            with quiet_numerics():
+                out = write_report(analyses, output, onsets)
+        except FlighttestError:
+            raise
+        except OSError as exc:
+            raise FlighttestError(f"report -o {output}: cannot write ({exc.strerror or exc})") from None
+        except Exception as exc:
+            raise FlighttestError(f"report -o {output}: writing the report failed ({_detail(exc)})") from None
+        console.print(f"wrote {out}", markup=False)
     return 2 if failed else 0
 
 
+def _detail(exc: BaseException) -> str:
+    """An unexpected exception as a short single-line detail for an error line."""
+    return " ".join(f"{type(exc).__name__}: {exc}".split())[:200]
+
+
+MAX_THRESHOLD_RATIO = 10.0  # beyond this no real onset would count, and "no onset up to X" would be invented
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
-    from flighttest.analysis.identify import IdentifyConfig, identify_onset
+    """The onset, or (exit 0) the lower bound of a quiet probe with the prior kept, or one line saying
+    why this log gives no onset to trust (exit 2, nothing stored): ``flighttest.analysis.identify``."""
+    from flighttest.analysis.identify import IdentifyConfig, NoOnset, identify_onset, no_onset_line
     from flighttest.analysis.loaders import load_log
     from flighttest.profiles import load_profile, write_w_allow
 
-    if not (math.isfinite(args.threshold) and args.threshold > 1.0):
-        raise FlighttestError(f"--threshold must be a number > 1 (got {args.threshold})")
+    if not (math.isfinite(args.threshold) and 1.0 < args.threshold <= MAX_THRESHOLD_RATIO):
+        raise FlighttestError(f"--threshold must be a number > 1 and at most {MAX_THRESHOLD_RATIO:g} "
+                              f"(got {args.threshold})")  # fmt: skip
     profile = load_profile(args.vehicle)
     log = load_log(args.log)
-    onset = identify_onset(log, profile, IdentifyConfig(threshold_ratio=args.threshold))
+    prior = profile.w_allow_mps
+    try:
+        onset = identify_onset(log, profile, IdentifyConfig(threshold_ratio=args.threshold))
+    except NoOnset as none:
+        line = no_onset_line(none.lower_bound_mps, prior)
+        if args.json:
+            print_json({"log": str(args.log), "vehicle": profile.name, **none.summary(), "prior_w_allow_mps": prior,
+                        "previous_w_allow_mps": prior, "profile_written": None, "message": line})  # fmt: skip
+            return 0
+        console.print(line)
+        console.print(f"[dim]{none} — {none.samples} samples; {none.evidence}[/]")
+        if args.write_profile:
+            console.print("nothing stored: there is no onset to store (the profile keeps its prior)")
+        return 0
     out = {
         "log": str(args.log),
         "vehicle": profile.name,
         **onset.summary(),
-        "previous_w_allow_mps": profile.w_allow_mps,
+        "prior_w_allow_mps": prior,
+        "previous_w_allow_mps": prior,
         "profile_written": None,
     }
     if args.write_profile:
@@ -497,6 +614,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f"(v_h {onset.v_h_mps:.2f} m/s; hinge fit, fluctuation rises {onset.rise_ratio:.1f}× over hover; "
         f"{onset.samples} descending samples up to {onset.max_speed_mps:.2f} m/s)"
     )
+    console.print(f"[dim]{onset.probe_evidence}[/]")
     console.print(f"profile w_allow now: {profile.w_allow_mps:.3f} m/s ({profile.w_allow_source})")
     if out["profile_written"]:
         console.print(f"stored w_allow = {onset.w_onset_mps:.3f} m/s in {out['profile_written']}")

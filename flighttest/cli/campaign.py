@@ -27,7 +27,7 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.table import Table
@@ -36,6 +36,9 @@ from flighttest.campaign.state import FLIGHT_STEPS, STEPS, TITLES, CampaignState
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
 from flighttest.inputs import Range, shown
+
+if TYPE_CHECKING:
+    from flighttest.profiles import VehicleProfile
 
 SIM_DEFAULT_PARAMS = {"MPC_Z_VEL_MAX_DN": 3.0}  # rehearsal: let offboard descents through unclipped
 
@@ -67,7 +70,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--yes", action="store_true", help="do not ask before each step and each flight")
     p.add_argument("--stale-periods", type=float, metavar="N",
-                   help="stale-telemetry allowance in telemetry periods (default: the mission configs', 3); "
+                   help="stale-telemetry allowance in telemetry periods (default: the mission configs' "
+                   "stale_after_s, 0.25 s); "
                    "raise it only when rehearsing on a heavily loaded machine")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the campaign summary as JSON (progress on stderr)")
     g = p.add_argument_group("the fake vehicle (--sim)")
@@ -181,25 +185,48 @@ class CampaignFailed(FlighttestError):
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
-    """The campaign; with ``--json`` stdout is JSON whatever happens (the summary, or the failure)."""
+    """The campaign; with ``--json`` stdout is JSON whatever happens: the summary, or — once a step has
+    begun — the summary so far with the failure (``error``, ``outcome``, ``failed_step``), or a refusal
+    before anything started (``{"error", "outcome", "out_dir"}``)."""
     from flighttest.cli.fly import json_failure
 
+    known: dict[str, Any] = {}  # the campaign's state, profile and step in progress, once steps begin
     try:
-        return _campaign(args)
+        return _campaign(args, known)
     except FlighttestError as exc:
+        if _json_stop(args, known, str(exc), "refused" if exc.exit_code == 2 else "failed"):
+            exc.json_printed = True  # type: ignore[attr-defined]
         json_failure(exc, args.json, out_dir=str(args.output))
         raise
     except KeyboardInterrupt:
-        if args.json:
+        if args.json and not _json_stop(args, known, "interrupted by the operator", "interrupted"):
             print_json({"error": "interrupted by the operator", "outcome": "interrupted", "out_dir": str(args.output)})
         raise
     except Exception as exc:  # a bug or a library's surprise: one line, the details in campaign.json
         err = CampaignFailed(f"campaign stopped by an unexpected error: {type(exc).__name__}: {exc}")
+        if _json_stop(args, known, str(err), "failed"):
+            err.json_printed = True  # type: ignore[attr-defined]
         json_failure(err, args.json, out_dir=str(args.output))
         raise err from exc
 
 
-def _campaign(args: argparse.Namespace) -> int:
+def _json_stop(args: argparse.Namespace, known: dict[str, Any], error: str, outcome: str) -> bool:
+    """With ``--json`` once steps have begun: print the summary so far with the failure; False when
+    there is nothing to summarise yet (the caller prints the refusal)."""
+    if not args.json or "state" not in known:
+        return False
+    from flighttest.campaign.summary import known_summary
+
+    try:
+        doc = known_summary(known["state"], known["profile"])
+    except Exception as exc:  # the summary must never hide the failure it reports
+        doc = {"out_dir": str(args.output), "summary_error": f"{type(exc).__name__}: {exc}"}
+    doc.update(error=error, outcome=outcome, failed_step=known.get("step"))
+    print_json(doc)
+    return True
+
+
+def _campaign(args: argparse.Namespace, known: dict[str, Any]) -> int:
     from flighttest.campaign.steps import RUNNERS, StepContext, StepFailed, write_configs
     from flighttest.cli.fly import confirm_go
     from flighttest.profiles import load_profile
@@ -216,6 +243,7 @@ def _campaign(args: argparse.Namespace) -> int:
     write_configs(state.dir)
     out = err_console if args.json else console
     state.save()
+    known.update(state=state, profile=profile, step=None)
 
     with contextlib.ExitStack() as stack:
         link: dict[str, str] = {}
@@ -242,10 +270,12 @@ def _campaign(args: argparse.Namespace) -> int:
             out.print(f"[dim]campaign time {_clock(time.monotonic() - t0)}; after this: {nxt}[/]")
             if not args.yes and not _ask(step):
                 out.print(f"stopped before '{step}'. Run the same command again to go on from here.")
+                _json_stop(args, known, f"stopped before '{step}' by the operator", "stopped")
                 return 1
             if not args.only:
                 state.invalidate(steps[k + 1:])
             state.begin(step)
+            known["step"] = step
             try:
                 if step in FLIGHT_STEPS:  # the flight handles Ctrl-C itself: its abort ladder
                     outputs = RUNNERS[step](ctx)
@@ -265,11 +295,12 @@ def _campaign(args: argparse.Namespace) -> int:
                 state.finish(step, "failed", error=str(exc) or type(exc).__name__)
                 raise
             state.finish(step, "done", outputs)
+            known["step"] = None
             out.print(f"[green]✓ {step}[/] in {_clock(state.steps[step].elapsed_s or 0)}  {_brief(step, outputs)}")
             if stop and k + 1 < len(steps):
                 out.print(f"[yellow]stopped after '{step}' (Ctrl-C)[/]; run the same command again to go on")
                 raise KeyboardInterrupt
-    return _final(state, args.json, out)
+    return _final(state, args.json, out, profile)
 
 
 @contextlib.contextmanager
@@ -312,6 +343,8 @@ def _brief(step: str, o: dict[str, Any]) -> str:
         d = o.get("descent_time_s")
         return f"{o['outcome']}" + (f", descent {d:.2f} s" if d else "") + f"; log {o['log_dir']}"
     if step == "identify":
+        if o.get("onset_found") is False:
+            return f"{o['message']} → {o['profile']}"
         return f"VRS onset {o['w_onset_mps']:.3f} ± {o['uncertainty_mps']:.3f} m/s → {o['profile']}"
     if step == "plan":
         return f"vertical {o['vertical_t_f_s']:.2f} s, helix {o['helix_t_f_s']:.2f} s planned"
@@ -320,13 +353,13 @@ def _brief(step: str, o: dict[str, Any]) -> str:
     return ""
 
 
-def _final(state: CampaignState, as_json: bool, out: Console) -> int:
-    from flighttest.campaign.summary import headlines, read_summary, table_rows
+def _final(state: CampaignState, as_json: bool, out: Console, profile: VehicleProfile) -> int:
+    from flighttest.campaign.summary import headlines, known_summary, read_summary, table_rows
 
     if not state.done("report"):
         status = {s: state.steps[s].status for s in STEPS}
-        if as_json:
-            print_json({"out_dir": str(state.dir.root), "steps": status})
+        if as_json:  # the summary so far: its keys, what campaign.json knows, and each step's status
+            print_json(known_summary(state, profile))
         else:
             out.print("steps: " + ", ".join(f"{s} {v}" for s, v in status.items()))
             out.print("no report yet: run the campaign again (without --only) to finish")

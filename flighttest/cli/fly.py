@@ -45,7 +45,13 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
                    help="vehicle link: udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT, serial://DEV:BAUD")
     p.add_argument("--vehicle", required=True, metavar="NAME", help="vehicle profile name or .toml path")
     p.add_argument("--config", type=Path, metavar="TOML", help="mission config (default: the mission's own TOML)")
-    p.add_argument("--height", type=float, metavar="H", help="start height above home in m (overrides the config)")
+    defaults = mission_defaults()
+    p.add_argument("--height", type=float, metavar="H",
+                   help=f"start height above home in m (overrides the config; {defaults['height']})")
+    p.add_argument("--descent", type=float, metavar="M",
+                   help=f"how far down from the start height in m (overrides the config; {defaults['descent']}); "
+                        "at most the start height minus the altitude floor; not for a trajectory file, whose "
+                        "descent is in the file")  # fmt: skip
     p.add_argument("--min-alt", type=float, metavar="M", help="altitude floor in m (overrides the config)")
     p.add_argument("--geofence-radius", type=float, metavar="R", help="horizontal room around the start in m")
     p.add_argument("--max-descent-speed", type=float, metavar="MPS",
@@ -62,12 +68,69 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
     p.add_argument("--json", action="store_true", help="print the flight summary as JSON")
 
 
+def mission_defaults() -> dict[str, str]:
+    """The named missions' start heights and descents as their TOMLs set them, for ``--help``
+    (``height``: "probe 8 m, helix 7 m, vertical 5 m"; a config that does not load says so)."""
+    from flighttest.mission_scripts import mission_config_path
+    from flighttest.missions_config import DESCENT_KEYS, load_mission_config
+
+    heights, descents = [], []
+    for mission in MISSIONS:
+        try:
+            cfg = load_mission_config(mission_config_path(mission))
+        except (FlighttestError, OSError):
+            heights.append(f"{mission}: its config does not load")
+            continue
+        heights.append(f"{mission} {cfg.flight.start_height_m:g} m")
+        depth = cfg.plan.get(DESCENT_KEYS[mission])
+        what = " (sweep depth)" if mission == "probe" else ""
+        descents.append(f"{mission} {depth:g} m{what}" if depth is not None else f"{mission}: its script's default")
+    return {"height": "by default " + ", ".join(heights), "descent": "by default " + ", ".join(descents)}
+
+
+def with_descent(cfg, descent_m: float | None, target: str):
+    """The config with ``--descent`` applied (``missions_config.DESCENT_KEYS``), refused for a trajectory
+    file (and a helix config flying a planned file): their descent is in the file."""
+    from flighttest.missions_config import DESCENT_KEYS
+
+    if descent_m is None:
+        return cfg
+    if cfg.mission not in DESCENT_KEYS:
+        raise FlighttestError(
+            f"--descent does not apply to a trajectory file ({target}): its descent is in the file "
+            "(plan another with `flighttest plan ... --height M`, or fly a named mission)"
+        )
+    if cfg.plan.get("trajectory"):
+        raise FlighttestError(f"--descent does not apply: {cfg.path or 'the config'} flies the planned file "
+                              f"{cfg.plan['trajectory']!r}, whose descent is in the file")  # fmt: skip
+    return dataclasses.replace(cfg, plan={**cfg.plan, DESCENT_KEYS[cfg.mission]: float(descent_m)})
+
+
+def check_room(cfg) -> None:
+    """The mission's descent fits between its start height and the altitude floor (one line, exit 2,
+    before anything connects)."""
+    from flighttest.missions_config import DESCENT_KEYS
+
+    fl = cfg.flight
+    if fl.start_height_m <= fl.min_alt_m:
+        raise FlighttestError(f"start height {fl.start_height_m:g} m must exceed the altitude floor {fl.min_alt_m:g} m")
+    key = DESCENT_KEYS.get(cfg.mission)
+    depth = cfg.plan.get(key) if key and not cfg.plan.get("trajectory") else None
+    room = fl.start_height_m - fl.min_alt_m
+    if depth is not None and depth > room + 1e-9:
+        raise FlighttestError(
+            f"the {cfg.mission} mission's descent of {depth:g} m from {fl.start_height_m:g} m goes below the "
+            f"altitude floor {fl.min_alt_m:g} m: at most {room:g} m (set --descent, --height or --min-alt)"
+        )
+
+
 def _check_numbers(args: argparse.Namespace) -> None:
     """Every number of the command line within its physical range (``flighttest.inputs``), before
     any file is read or anything connects."""
     from flighttest import inputs as ip
 
-    checks = (("--height", args.height, ip.START_HEIGHT_M), ("--min-alt", args.min_alt, ip.ALTITUDE_FLOOR_M),
+    checks = (("--height", args.height, ip.START_HEIGHT_M), ("--descent", args.descent, ip.HEIGHT_M),
+              ("--min-alt", args.min_alt, ip.ALTITUDE_FLOOR_M),
               ("--geofence-radius", args.geofence_radius, ip.DISTANCE_M),
               ("--max-descent-speed", args.max_descent_speed, ip.SPEED_MPS),
               ("--sysid", args.sysid, ip.SYSID))  # fmt: skip
@@ -137,10 +200,8 @@ def build_request(args: argparse.Namespace, mission: str | None = None, module: 
         if cfg.mission != "probe":
             raise FlighttestError("--max-descent-speed applies to the probe mission only")
         cfg = dataclasses.replace(cfg, plan={**cfg.plan, "max_descent_mps": args.max_descent_speed})
-    if cfg.flight.start_height_m <= cfg.flight.min_alt_m:
-        raise FlighttestError(
-            f"start height {cfg.flight.start_height_m:g} m must exceed the altitude floor {cfg.flight.min_alt_m:g} m"
-        )
+    cfg = with_descent(cfg, args.descent, str(target))
+    check_room(cfg)
     if module is not None:
         try:
             traj = module.plan(profile, cfg)
@@ -186,7 +247,9 @@ def run_request(req, as_json: bool) -> int:
         if out.abort_reason:
             line += f": {out.abort_reason}"
         if out.descent_time_s is not None:
-            line += f"  (descent {out.descent_time_s:.2f} s)"
+            off = out.extra.get("horizontal_error_m")
+            side = f", {off:.2f} m off sideways" if off is not None else ""
+            line += f"  (descent {out.descent_time_s:.2f} s{side})"
         console.print(line)
         if out.log_dir:
             console.print(f"log: {out.log_dir}")

@@ -29,14 +29,16 @@ so ``unix_s`` is NaN. Multi-instance records (``I``, ``C``, ``Instance``) keep i
 from __future__ import annotations
 
 import contextlib
+import gc
 import io
 import os
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
-from pymavlink import mavutil
+from pymavlink import DFReader, mavutil
 
 from flighttest.analysis.schema import (
     FlightLog,
@@ -125,29 +127,61 @@ def _types_to_read(counts: dict[str, int] | None) -> list[str]:
     ]
 
 
+def _number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _close(df) -> None:
+    """DFReader keeps its file and memory map open until garbage collection (ResourceWarning)."""
+    for name in ("data_map", "filehandle"):
+        with contextlib.suppress(Exception):
+            getattr(df, name).close()
+
+
 def _read(path: Path) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, float], str]:
     rows: dict[str, dict[str, list]] = {k: {f: [] for f in v} for k, v in WANTED.items()}
     instance = {k: next((f for f in v if f in INSTANCE_FIELDS), None) for k, v in WANTED.items()}
     params: dict[str, float] = {}
     chatter = io.StringIO()
+    df = None
+    failure = None
     try:
-        with _quiet_fds(), contextlib.redirect_stderr(chatter), contextlib.redirect_stdout(chatter):
-            df = mavutil.mavlink_connection(str(path))
+        with (
+            _quiet_fds(),
+            contextlib.redirect_stderr(chatter),
+            contextlib.redirect_stdout(chatter),
+            warnings.catch_warnings(),
+        ):
+            # a DFReader that fails in its constructor leaves its file open for the garbage collector
+            warnings.simplefilter("ignore", ResourceWarning)
+            # the binary reader itself, not mavutil.mavlink_connection: that picks the reader by the file
+            # name, so a DataFlash log not named .bin was read as MAVLink byte by byte (a minute, then
+            # "no readable records"), and a name with a ':' would even be taken for a UDP address
+            df = DFReader.DFReader_binary(str(path))
             types = _types_to_read(_record_counts(df))
             while (m := df.recv_match(type=types)) is not None:
                 name = m.get_type()
                 d = m.to_dict()
                 if name == PARM:
-                    if isinstance(d.get("Name"), str) and isinstance(d.get("Value"), int | float):
-                        params[d["Name"]] = param_value(d["Value"])
+                    value = d.get("Value")
+                    if isinstance(d.get("Name"), str) and _number(value) and np.isfinite(value):
+                        params[d["Name"]] = param_value(value)
                     continue
                 inst = instance[name]
                 if inst is not None and d.get(inst, 0) != 0:
                     continue  # first IMU / EKF core / barometer / GPS / rangefinder only
                 for f, col in rows[name].items():
-                    col.append(d.get(f, np.nan))
+                    v = d.get(f, np.nan)
+                    col.append(v if _number(v) else np.nan)  # a damaged FMT can make a field text
     except Exception as exc:
-        raise FlighttestError(f"{path}: cannot parse DataFlash log ({type(exc).__name__}: {exc})") from None
+        failure = f"{type(exc).__name__}: {exc}"
+    finally:
+        _close(df)
+    if failure is not None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ResourceWarning)
+            gc.collect()  # the failed reader's file is closed here, quietly, not in some later finalizer
+        raise FlighttestError(f"{path}: cannot parse DataFlash log ({' '.join(failure.split())[:200]})")
     out = {k: {f: np.asarray(v, dtype=float) for f, v in cols.items()} for k, cols in rows.items() if cols["TimeUS"]}
     return out, dict(sorted(params.items())), chatter.getvalue()
 
@@ -257,8 +291,9 @@ def load_dataflash(path: Path) -> FlightLog:
         for k in range(mi.shape[1]):
             cols[f"motor_{k}"] = mi[:, k]
     if (mode := msgs.get("MODE")) is not None:
-        names = np.array([mavutil.mode_string_acm(int(n)) for n in mode["ModeNum"]], dtype=object)
-        cols["mode"] = resample(mode["TimeUS"] / 1e6, names, t, 1e9, hold=True)
+        ok = np.isfinite(mode["ModeNum"]) & (np.abs(mode["ModeNum"]) < 2**31)  # damaged records: NaN, 1e30
+        names = np.array([mavutil.mode_string_acm(int(n)) for n in mode["ModeNum"][ok]], dtype=object)
+        cols["mode"] = resample(mode["TimeUS"][ok] / 1e6, names, t, 1e9, hold=True)
     if (arm := msgs.get("ARM")) is not None:
         cols["armed"] = resample(arm["TimeUS"] / 1e6, (arm["ArmState"] != 0).astype(float), t, 1e9, hold=True)
     elif (ev := msgs.get("EV")) is not None:

@@ -26,6 +26,10 @@ The data carry only the boot clock (the state's ``boot_s``), so ``unix_s`` is Na
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -92,10 +96,39 @@ ROTATION_DOWNWARD_FACING = 25
 
 
 def _topic(ulog, name: str) -> dict[str, np.ndarray] | None:
+    """Instance 0 of a topic, its numeric fields only (a damaged format can make a field text)."""
     for d in ulog.data_list:
         if d.name == name and d.multi_id == 0 and len(d.data.get("timestamp", ())) > 0:
-            return d.data
+            data = {k: v for k, v in d.data.items() if getattr(v, "dtype", None) is not None and v.dtype.kind in "biuf"}
+            return data if "timestamp" in data else None
     return None
+
+
+class _ReadBudgetExceeded(Exception):
+    """Raised inside pyulog when a damaged file makes it re-read without end (see :class:`_BoundedFile`)."""
+
+
+class _BoundedFile(io.FileIO):
+    """The ULog file for pyulog, with a bound on the bytes it may read.
+
+    pyulog resynchronises after damage in its definitions section one byte at a time, reading the
+    whole (garbage) message length again each time: a few flipped bytes cost minutes. A sound parse
+    reads the file about once; ``READ_BUDGET`` times its size (plus a floor for small files) leaves
+    room for genuine resyncs and stops the pathological ones with a clear error."""
+
+    READ_BUDGET = 8
+    READ_FLOOR = 16_000_000
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path, "r")
+        self._left = self.READ_BUDGET * os.fstat(self.fileno()).st_size + self.READ_FLOOR
+
+    def read(self, size: int = -1) -> bytes:  # type: ignore[override]
+        data = super().read(size)
+        self._left -= len(data) + 64  # a call costs too: many tiny reads are as slow as big ones
+        if self._left < 0:
+            raise _ReadBudgetExceeded()
+        return data
 
 
 def _cols(d: dict[str, np.ndarray], base: str, n: int) -> np.ndarray | None:
@@ -152,13 +185,33 @@ def load_ulog(path: Path) -> FlightLog:
         head = fh.read(len(ULOG_MAGIC))
     if head != ULOG_MAGIC:
         raise FlighttestError(f"{path}: not a PX4 ULog file (bad header)")
+    chatter = io.StringIO()
     try:
-        ulog = ULog(str(path), TOPICS, disable_str_exceptions=True)
+        # pyulog prints its damage reports (print(), on stdout: they broke --json) and may warn; both
+        # are caught here and become one note
+        with (
+            _BoundedFile(path) as fh,
+            contextlib.redirect_stdout(chatter),
+            contextlib.redirect_stderr(chatter),
+            warnings.catch_warnings(record=True) as caught,
+        ):
+            warnings.simplefilter("always")
+            ulog = ULog(fh, TOPICS, disable_str_exceptions=True)
+    except _ReadBudgetExceeded:
+        raise FlighttestError(
+            f"{path}: cannot parse ULog: damaged beyond what the reader can resynchronise on (it kept re-reading "
+            "the same bytes)"
+        ) from None
     except Exception as exc:  # pyulog raises assorted errors on damaged files
         raise FlighttestError(f"{path}: cannot parse ULog ({type(exc).__name__}: {exc})") from None
     notes = []
-    if ulog.file_corruption:
-        notes.append("ULog reports corruption: data after the damage may be missing")
+    said = [ln.strip() for ln in chatter.getvalue().splitlines() if ln.strip()] + [str(w.message) for w in caught]
+    if ulog.file_corruption or said:
+        note = "ULog reports corruption: data after the damage may be missing"
+        if said:
+            more = f"; and {len(said) - 1} more line(s)" if len(said) > 1 else ""
+            note += f" (the reader said: {said[0][:120]}{more})"
+        notes.append(note)
     lp = _topic(ulog, "vehicle_local_position")
     if lp is None or not all(k in lp for k in ("x", "y", "z")):
         raise FlighttestError(f"{path}: log has no position (vehicle_local_position)")
@@ -189,7 +242,9 @@ def load_ulog(path: Path) -> FlightLog:
         m = _cols(am, "control", 4)
         motors = (am["timestamp"], m) if m is not None else None
     if motors is None and (ao := _topic(ulog, "actuator_outputs")) is not None:
-        n = int(np.max(ao.get("noutputs", [4]))) or 4
+        nout = np.asarray(ao.get("noutputs", [4]), float)
+        n = int(np.nanmax(nout)) if np.isfinite(nout).any() and np.nanmax(nout) < 256 else 4
+        n = n or 4
         m = _cols(ao, "output", min(max(n, 1), 8))
         if m is not None:
             motors = (ao["timestamp"], np.where(np.abs(m) > 100, (m - 1000.0) / 1000.0, m))
@@ -202,8 +257,10 @@ def load_ulog(path: Path) -> FlightLog:
     if (vs := _topic(ulog, "vehicle_status")) is not None:
         ts = vs["timestamp"] / 1e6
         if "nav_state" in vs:
-            names = np.array([NAV_STATE.get(int(s), f"NAV_STATE({int(s)})") for s in vs["nav_state"]], dtype=object)
-            cols["mode"] = resample(ts, names, t, 1e9, hold=True)
+            nav = vs["nav_state"].astype(float)
+            ok = np.isfinite(nav) & (np.abs(nav) < 2**31)  # a damaged format can make it a float, NaN
+            names = np.array([NAV_STATE.get(int(s), f"NAV_STATE({int(s)})") for s in nav[ok]], dtype=object)
+            cols["mode"] = resample(ts[ok], names, t, 1e9, hold=True)
         if "arming_state" in vs:
             cols["armed"] = resample(ts, (vs["arming_state"] == ARMED).astype(float), t, 1e9, hold=True)
     wind = _topic(ulog, "wind") or _topic(ulog, "wind_estimate")
@@ -237,7 +294,11 @@ def load_ulog(path: Path) -> FlightLog:
                 if src in sp:
                     spd[dst] = sp[src]
         setpoints = pd.DataFrame(spd)
-    params = {str(k): param_value(v) for k, v in sorted(ulog.initial_parameters.items())}
+    params = {
+        str(k): param_value(v)
+        for k, v in sorted(ulog.initial_parameters.items(), key=lambda kv: str(kv[0]))
+        if isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool) and np.isfinite(v)
+    }
     return FlightLog(
         path=Path(path),
         source="ulog",
