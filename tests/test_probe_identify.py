@@ -120,7 +120,9 @@ def test_probe_finds_the_truth_onset(fake_vehicle_factory, tmp_path, truth_onset
     descents = [d for d in report["descents"] if d["mission"] == "probe"]
     assert descents and all(d["fluct_index_max"] is not None for d in descents)
     loud = [d for d in descents if d["max_rate_mps"] > truth_onset + 0.05]
-    assert loud and loud[0]["phase"] == "stream" and loud[0]["fluct_index_max"] > 3.0, descents
+    # the sweep's last descent runs on into the ladder's recovery and Land: labelled by where it began
+    assert loud and loud[0]["phase"] in ("stream", "abort_recover", "abort_land"), descents
+    assert loud[0]["fluct_index_max"] > 3.0, descents
     assert loud[0]["rate_rms_max_radps"] > 0.01
     # the earlier sweeps slower than the onset are quiet (the landing after the abort still shakes:
     # it is not one of them)

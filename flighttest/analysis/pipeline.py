@@ -80,6 +80,7 @@ def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
     """Mission, trajectory and phase of each descent (flighttest folders); what the live guard logged
     inside it: samples it measured inside its region (``margin_mps < 0``) and the actions it took.
 
+    A descent is labelled with the phase at its middle, or at its start when the abort cut it short.
     A descent that starts after the flight's abort began is phase ``"abort"`` unless the log names
     the ladder's phase (``abort_recover|abort_hold|abort_land``: folders written before the ladder
     logged its phases label PX4's Land after an abort ``stream``). The flight's descent is timed
@@ -113,6 +114,10 @@ def _context(log: FlightLog, descents: pd.DataFrame) -> pd.DataFrame:
                 phase = str(inside["phase"].mode().iloc[0])
         if t_abort is not None and row.start_s >= t_abort and not is_abort_phase(phase):
             phase = "abort"
+        elif is_abort_phase(phase) and (t_abort is None or row.start_s < t_abort):
+            # a descent the abort cut short (the probe's loud one) was flown in the phase it began in
+            at_start = [p for t, p in phase_events if t <= row.start_s]
+            phase = at_start[-1] if at_start else phase
         phases.append(phase)
         if gd is not None and "t_s" in gd and "margin_mps" in gd:
             inside = gd[(gd["t_s"] >= row.start_s) & (gd["t_s"] <= row.end_s)]

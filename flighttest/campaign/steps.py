@@ -134,6 +134,7 @@ def _keep_profile(profile: VehicleProfile, target: Path) -> None:
 
 
 def run_identify(ctx: StepContext) -> dict[str, Any]:
+    from flighttest.analysis.batch import quiet_numerics
     from flighttest.analysis.identify import NoOnset, identify_onset, no_onset_line
     from flighttest.analysis.loaders import load_log
 
@@ -143,7 +144,8 @@ def run_identify(ctx: StepContext) -> dict[str, Any]:
     prior = profile.w_allow_mps
     base = {"probe_log": str(log_dir), "vehicle": profile.name, "prior_w_allow_mps": prior}
     try:
-        onset = identify_onset(load_log(log_dir), profile)
+        with quiet_numerics():  # numpy's all-NaN windows of streams a log lacks: nothing to tell the user
+            onset = identify_onset(load_log(log_dir), profile)
     except NoOnset as none:  # quiet up to the top speed: the onset lies above it; fly by the prior
         line = no_onset_line(none.lower_bound_mps, prior)
         _keep_profile(profile, target)

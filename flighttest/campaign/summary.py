@@ -158,6 +158,13 @@ def summary_markdown(summary: dict) -> str:
 
 def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict[str, Any]:
     """Analyse the campaign's flights and write every file of ``REPORT_FILES`` into ``DIR/report``."""
+    from flighttest.analysis.batch import quiet_numerics
+
+    with quiet_numerics():  # numpy's and matplotlib's warnings about absent streams: nothing for the user
+        return _write_campaign_report(state, profile)
+
+
+def _write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict[str, Any]:
     from flighttest.analysis.identify import NoOnset, identify_onset
     from flighttest.analysis.loaders import load_log
     from flighttest.analysis.pipeline import analyse

@@ -46,7 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     pa = sub.add_parser(
         "analyse",
         help="descents, timing, VRS exposure and fluctuation of flight logs",
-        description="Analyse flighttest log folders, MAVLink .tlog, ArduPilot .bin and PX4 .ulg files. "
+        description="Analyse flighttest log folders, MAVLink .tlog, ArduPilot .bin and PX4 .ulg files (told by "
+        "their content, whatever their name). "
         "A folder that is not itself a flight log is walked for logs of every format, analysed on every "
         "core, and its per-descent table written as Parquet.",
     )
@@ -90,7 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Find the descent speed (blade-frame, air-relative) at which fluctuation first rises "
         "above the flight's hover baseline, with its uncertainty, normalised by v_h.",
     )
-    pi.add_argument("log", type=Path, metavar="LOG")
+    pi.add_argument("log", metavar="LOG")  # text: Path("") would be the current folder
     pi.add_argument("--vehicle", required=True, metavar="NAME", help="vehicle profile name or .toml path")
     pi.add_argument(
         "--threshold",
@@ -165,7 +166,9 @@ def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
         if p.is_dir() and not is_log_folder(p):
             found = find_logs(p)
             if not found:
-                raise FlighttestError(f"{p}: no flight logs found (.tlog, .bin, .ulg or flighttest log folders)")
+                raise FlighttestError(
+                    f"{p}: no flight logs found (.tlog, .bin, .ulg, by name or content, or flighttest log folders)"
+                )
             logs += found
             walked.append(p)
         else:
@@ -578,11 +581,15 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.threshold) and 1.0 < args.threshold <= MAX_THRESHOLD_RATIO):
         raise FlighttestError(f"--threshold must be a number > 1 and at most {MAX_THRESHOLD_RATIO:g} "
                               f"(got {args.threshold})")  # fmt: skip
+    from flighttest.analysis.batch import quiet_numerics
+
     profile = load_profile(args.vehicle)
-    log = load_log(args.log)
+    (args.log,) = _log_paths([args.log])
     prior = profile.w_allow_mps
     try:
-        onset = identify_onset(log, profile, IdentifyConfig(threshold_ratio=args.threshold))
+        with quiet_numerics():
+            log = load_log(args.log)
+            onset = identify_onset(log, profile, IdentifyConfig(threshold_ratio=args.threshold))
     except NoOnset as none:
         line = no_onset_line(none.lower_bound_mps, prior)
         if args.json:

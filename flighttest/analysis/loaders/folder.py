@@ -231,7 +231,9 @@ def load_folder(path: Path) -> FlightLog:
     tlog = path / TLOG_NAME
     if not tlog.is_file():
         raise FlighttestError(f"{path}: flight log folder has no {TLOG_NAME}")
-    log = load_tlog(tlog)
+    from flighttest.analysis.loaders import check_log_path  # the package imports this module
+
+    log = load_tlog(check_log_path(tlog))  # a regular file of bounded size, not empty
     meta = _json(path / "meta.json", notes)
     summary = _json(path / "summary.json", notes)
     traj = _json(path / "trajectory.json", notes)
