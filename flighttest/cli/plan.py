@@ -65,7 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     ph.add_argument("--rate-max", type=ip.BODY_RATE_DPS, metavar="DPS", help="body-rate bound (default the profile's)")
     ph.add_argument("--thrust-fraction", type=ip.FRACTION, default=0.9, help="share of max thrust to plan with (0.9)")
     ph.add_argument("--wind", nargs=3, type=ip.WIND_MPS, metavar=("WN", "WE", "WD"), help="wind NED, m/s")
-    ph.add_argument("--intervals", type=ip.INTERVALS, default=60, metavar="N", help="mesh intervals (default 60)")
+    ph.add_argument("--intervals", type=ip.INTERVALS, default=60, metavar="N",
+                    help="mesh intervals, at least (default 60; a long descent gets more)")
     _common(ph, kind="helix", constraint=True)
     ph.set_defaults(func=cmd_helix)
 
