@@ -88,10 +88,14 @@ def planar_trajectory(
 def helix_trajectory(
     sol: helix_mod.HelixSolution, vehicle: str, mass_kg: float, extra: dict | None = None
 ) -> Trajectory:
+    """The helix written at 100 Hz from its dense re-simulation (``helix.dense_path``: each mesh
+    interval integrated at 1 kHz from its own node, so position, velocity, acceleration and
+    attitude agree, and a long descent carries no open-loop drift), linearly interpolated."""
     r = sol.result
-    t, x, u = helix_mod.resimulate(r, 1000.0)
-    i = _decimate(t, OUTPUT_RATE_HZ)
-    t, x, u = t[i], x[i], u[i]
+    d = helix_mod.dense_path(r, 1000.0)
+    t = np.linspace(0.0, d.t[-1], max(int(np.ceil(d.t[-1] * OUTPUT_RATE_HZ - 1e-9)), 1) + 1)
+    x = np.stack([np.interp(t, d.t, d.x[:, j]) for j in range(d.x.shape[1])], 1)
+    u = np.stack([np.interp(t, d.t, d.u[:, j]) for j in range(d.u.shape[1])], 1)
     q = x[:, 6:10] / np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
     acc = quat_to_rotmat(q)[:, :, 2] * (-u[:, 0:1]) + np.array([0.0, 0.0, G_MPS2])
     roll, pitch, yaw = quat_to_euler(q)

@@ -63,6 +63,10 @@ class OcpSpec:
     # which the controls would otherwise chatter at the mesh frequency; the weight is far below
     # the solver tolerance on T (reported objective is T alone).
     smooth_weight: np.ndarray | None = None
+    # Small penalty ``Σ h_k · w·u_k²`` on the controls' size (per control, per second): in a long
+    # descent the optimum rides several bounds at once and the rates are left nearly free (the yaw
+    # of a helix is a symmetry), which leaves IPOPT a flat, degenerate tail of iterations.
+    control_weight: np.ndarray | None = None
     ipopt_options: dict = field(default_factory=dict)
 
 
@@ -79,6 +83,9 @@ class OcpResult:
     max_defect: float
     mesh: np.ndarray
     guess: str = ""
+    # IPOPT's multipliers at the solution (bounds, constraints): a warm start of the same NLP
+    lam_x: np.ndarray | None = None
+    lam_g: np.ndarray | None = None
 
 
 class SolvedOcp:
@@ -163,6 +170,9 @@ class MinTimeOcp:
             du = u1s - u0s
             w = ca.DM(s.smooth_weight)
             obj = obj + ca.sum2(ca.sum1(w * du * du)) / n
+        if s.control_weight is not None:
+            w = ca.DM(s.control_weight)
+            obj = obj + ca.sum2(ca.sum1(w * us[:, :-1] ** 2) * h_row)
 
         z = ca.vertcat(t_var, ca.vec(xs), ca.vec(us))
         opts = dict(IPOPT_QUIET)
@@ -199,11 +209,14 @@ class MinTimeOcp:
 
     def solve(self, t_guess: float, x_guess: np.ndarray, u_guess: np.ndarray, name: str = "",
               xf_lb: np.ndarray | None = None, xf_ub: np.ndarray | None = None,
-              mesh: np.ndarray | None = None, path_lb: np.ndarray | None = None) -> OcpResult:  # fmt: skip
+              mesh: np.ndarray | None = None, path_lb: np.ndarray | None = None,
+              warm: OcpResult | None = None) -> OcpResult:  # fmt: skip
         """Solve from a guess: ``x_guess`` (N+1, nx), ``u_guess`` (N+1, nu) on the nodes of ``mesh``
         (interval fractions of T summing to 1; uniform by default); optionally other final state
         bounds than the spec's (e.g. another turn of a flip) or other lower bounds of the path
-        constraints (tightened to keep the flown path inside between nodes) on the same NLP."""
+        constraints (tightened to keep the flown path inside between nodes) on the same NLP:
+        ``path_lb`` one row for every point, or ``(2N+1, n_path)`` rows, the N+1 nodes then the N
+        interval midpoints (tightened where the path breaks a bound only)."""
         s = self.spec
         n = s.n_intervals
         mesh = np.full(n, 1.0 / n) if mesh is None else np.asarray(mesh, float) / np.sum(mesh)
@@ -220,8 +233,12 @@ class MinTimeOcp:
         lbg = self.lbg
         if path_lb is not None:
             lbg = lbg.copy()
-            lbg[self._path_rows] = np.tile(np.asarray(path_lb, float), 2 * n + 1)
-        sol = self.solver(x0=z0, p=mesh, lbx=lbz, ubx=ubz, lbg=lbg, ubg=self.ubg)
+            plb = np.asarray(path_lb, float)
+            lbg[self._path_rows] = np.tile(plb, 2 * n + 1) if plb.ndim == 1 else plb.ravel()
+        kw = {}
+        if warm is not None and warm.lam_x is not None and len(warm.lam_x) == len(z0):
+            kw = {"lam_x0": warm.lam_x, "lam_g0": warm.lam_g}
+        sol = self.solver(x0=z0, p=mesh, lbx=lbz, ubx=ubz, lbg=lbg, ubg=self.ubg, **kw)
         solve_s = time.perf_counter() - t0
         stats = self.solver.stats()
         z = np.asarray(sol["x"]).ravel()
@@ -242,6 +259,8 @@ class MinTimeOcp:
             iterations=int(stats.get("iter_count", -1)),
             max_defect=float(np.abs(defects).max()) if defects.size else 0.0,
             guess=name,
+            lam_x=np.asarray(sol["lam_x"]).ravel(),
+            lam_g=np.asarray(sol["lam_g"]).ravel(),
         )
 
 
@@ -322,22 +341,92 @@ _RK4_CHUNK = 1000
 _RK4_STEPPERS: dict[tuple, ca.Function] = {}
 
 
+def _rk4_step(dynamics: Dynamics, nx: int, nu: int) -> ca.Function:
+    """One RK4 step ``x_next = F(x, [u0; u_mid; u1; h])`` of ``ẋ = dynamics(x, u)``."""
+    x = ca.SX.sym("x", nx)
+    u0, um, u1 = ca.SX.sym("u0", nu), ca.SX.sym("um", nu), ca.SX.sym("u1", nu)
+    h = ca.SX.sym("h")
+    f = ca.Function("f", [x, u0], [dynamics(x, u0)])
+    k1 = f(x, u0)
+    k2 = f(x + 0.5 * h * k1, um)
+    k3 = f(x + 0.5 * h * k2, um)
+    k4 = f(x + h * k3, u1)
+    return ca.Function("rk4", [x, ca.vertcat(u0, um, u1, h)], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+
+
 def _rk4_stepper(dynamics: Dynamics, nx: int, nu: int) -> ca.Function:
     """``_RK4_CHUNK`` chained RK4 steps of ``ẋ = dynamics(x, u)`` as one compiled CasADi function
     ``x_end_all = F(x0, [u0; u_mid; u1; h] per step)``, built once per dynamics."""
     key = (dynamics, nx, nu)
     if key not in _RK4_STEPPERS:
-        x = ca.SX.sym("x", nx)
-        u0, um, u1 = ca.SX.sym("u0", nu), ca.SX.sym("um", nu), ca.SX.sym("u1", nu)
-        h = ca.SX.sym("h")
-        f = ca.Function("f", [x, u0], [dynamics(x, u0)])
-        k1 = f(x, u0)
-        k2 = f(x + 0.5 * h * k1, um)
-        k3 = f(x + 0.5 * h * k2, um)
-        k4 = f(x + h * k3, u1)
-        step = ca.Function("rk4", [x, ca.vertcat(u0, um, u1, h)], [x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
-        _RK4_STEPPERS[key] = step.mapaccum(_RK4_CHUNK)
+        _RK4_STEPPERS[key] = _rk4_step(dynamics, nx, nu).mapaccum(_RK4_CHUNK)
     return _RK4_STEPPERS[key]
+
+
+_INTERVAL_INTEGRATORS: dict[tuple, ca.Function] = {}
+
+
+def _interval_integrator(dynamics: Dynamics, nx: int, nu: int, steps: int) -> ca.Function:
+    """``steps`` chained RK4 steps across one interval: ``F(x0, [u0; u_mid; u1; h] per step)`` → the
+    state after each step, built once per dynamics and step count (then mapped over intervals)."""
+    key = (dynamics, nx, nu, steps)
+    if key not in _INTERVAL_INTEGRATORS:
+        _INTERVAL_INTEGRATORS[key] = _rk4_step(dynamics, nx, nu).mapaccum(steps)
+    return _INTERVAL_INTEGRATORS[key]
+
+
+@dataclass
+class DenseSolution:
+    """A solution re-simulated interval by interval from its own nodes (multiple-shooting style).
+
+    ``t`` (M,), ``x`` (M, nx), ``u`` (M, nu): at least ``rate_hz`` samples per second, each interval
+    integrated with RK4 from its start node with the linearly interpolated controls, then the gap to
+    the next node (the integration error of the NLP's one RK4 step per interval) spread linearly
+    over the interval so the path is continuous and ends on the solver's nodes. ``gaps`` (N, nx):
+    that node-to-node integration error per interval, before spreading.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    u: np.ndarray
+    gaps: np.ndarray
+
+
+def rk4_piecewise(dynamics: Dynamics, t_nodes: np.ndarray, x_nodes: np.ndarray, u_nodes: np.ndarray,
+                  rate_hz: float = 1000.0) -> DenseSolution:  # fmt: skip
+    """Re-simulate every interval from its own node (see ``DenseSolution``).
+
+    Why not open loop from the first state only: the vehicle's dynamics with rate inputs integrate
+    attitude errors twice into position, so over a long descent (10 s and more) an open-loop
+    integration of the node controls drifts by metres from the planned path, although every
+    interval follows the dynamics to integration accuracy. That drift is a numerical artefact (the
+    autopilot's position loop removes it in flight), not the plan breaking a bound; what can break a
+    bound is the path *between* nodes, which this re-simulation resolves at ``rate_hz``.
+    """
+    t_nodes = np.asarray(t_nodes, float)
+    x_nodes = np.asarray(x_nodes, float)
+    u_nodes = np.asarray(u_nodes, float)
+    h = np.diff(t_nodes)
+    n = len(h)
+    nx, nu = x_nodes.shape[1], u_nodes.shape[1]
+    m = max(int(np.ceil(h.max() * rate_hz - 1e-9)), 1)
+    s0 = np.arange(m) / m  # substep start, mid and end as fractions of each interval
+    sm = s0 + 0.5 / m
+    s1 = s0 + 1.0 / m
+    u0, u1 = u_nodes[:-1], u_nodes[1:]  # (n, nu)
+
+    def lerp(s):  # (n·m, nu): controls at fractions s of every interval
+        return (u0[:, None, :] + s[None, :, None] * (u1 - u0)[:, None, :]).reshape(n * m, nu)
+
+    inputs = np.concatenate([lerp(s0), lerp(sm), lerp(s1), np.repeat(h / m, m)[:, None]], axis=1).T
+    f = _interval_integrator(dynamics, nx, nu, m).map(n)
+    xs = np.asarray(f(x_nodes[:-1].T, inputs)).T.reshape(n, m, nx)  # state after each substep
+    gaps = xs[:, -1, :] - x_nodes[1:]
+    xs = xs - s1[None, :, None] * gaps[:, None, :]
+    t = np.concatenate([[t_nodes[0]], (t_nodes[:-1, None] + s1[None, :] * h[:, None]).ravel()])
+    x = np.concatenate([x_nodes[:1], xs.reshape(n * m, nx)])
+    u = np.concatenate([u_nodes[:1], lerp(s1)])
+    return DenseSolution(t=t, x=x, u=u, gaps=gaps)
 
 
 def rk4_resimulate_compiled(dynamics: Dynamics, t_nodes: np.ndarray, x0: np.ndarray, u_nodes: np.ndarray,
