@@ -377,3 +377,21 @@ def check_path_text(path: Path | str, what: str) -> str:
     of a longer path raises ``ENAMETOOLONG``). For inputs that may be a file or a folder (log
     folders); :func:`check_input_file` and :func:`check_output_path` run the same checks."""
     return _path_text(path, what)
+
+
+def check_output_folder(text: str | os.PathLike, name: str) -> Path:
+    """An output *folder* (``-o DIR``, ``--log-dir``) checked before anything is written or connects: a
+    name (an empty one would be the current folder), no control character, and a folder there must be
+    possible: the nearest existing ancestor is a writable folder, not a file. Nothing is created here."""
+    text = os.fspath(text)
+    if not text.strip() or any(not c.isprintable() for c in text):
+        raise FlighttestError(f"{name} {text!r}: not a folder name (empty, or a control character)")
+    root = Path(text)
+    probe = root
+    while not probe.exists() and probe != probe.parent:  # the nearest folder that exists
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise FlighttestError(f"{name} {text}: {probe} is a file, not a folder")
+    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
+        raise FlighttestError(f"{name} {text}: the folder {probe} is not writable")
+    return root

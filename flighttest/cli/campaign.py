@@ -135,20 +135,9 @@ def _validate(args: argparse.Namespace) -> dict[str, Any]:
 def _output_dir(text: str | Path) -> Path:
     """``-o DIR`` as a folder the campaign can live in, checked before anything is written (an empty
     name would be the current folder; a file, or a folder under a file, cannot hold a campaign)."""
-    import os
+    from flighttest.inputs import check_output_folder
 
-    text = os.fspath(text)
-    if not text.strip() or any(not c.isprintable() for c in text):
-        raise FlighttestError(f"-o {shown(text)}: not a folder name (empty, or a control character)")
-    root = Path(text)
-    probe = root
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
-    if probe.exists() and not probe.is_dir():
-        raise FlighttestError(f"-o {text}: {probe} is a file, not a folder")
-    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
-        raise FlighttestError(f"-o {text}: the folder {probe} is not writable")
-    return root
+    return check_output_folder(text, "-o")
 
 
 def _sim_param(item: str) -> tuple[str, float]:

@@ -151,17 +151,9 @@ def log_root(text: str | None) -> Path:
         name, text = "$FLIGHTTEST_LOG_DIR", (env if env is not None else "logs")
     else:
         name = "--log-dir"
-    if not text.strip() or any(not c.isprintable() for c in text):
-        raise FlighttestError(f"{name} {text!r}: not a folder name (empty, or a control character)")
-    root = Path(text)
-    probe = root
-    while not probe.exists() and probe != probe.parent:  # the nearest folder that exists
-        probe = probe.parent
-    if probe.exists() and not probe.is_dir():
-        raise FlighttestError(f"{name} {text}: {probe} is a file, not a folder")
-    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
-        raise FlighttestError(f"{name} {text}: the folder {probe} is not writable")
-    return root
+    from flighttest.inputs import check_output_folder
+
+    return check_output_folder(text, name)
 
 
 def build_request(args: argparse.Namespace, mission: str | None = None, module: ModuleType | None = None):
