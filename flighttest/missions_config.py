@@ -59,11 +59,14 @@ class FlightConfig:
     takeoff_timeout_s: float = 40.0
     connect_timeout_s: float = 15.0
     min_battery_percent: float = 30.0
+    # the acceleration feed-forward is sent this much ahead of the plan (flighttest.feedforward): the
+    # autopilot's tilt trails a new thrust direction by about this long
+    feedforward_lead_s: float = 0.2
 
 
 @dataclass(frozen=True)
 class GuardConfig:
-    horizon_s: float = 0.2
+    horizon_s: float = 0.1
     debounce_samples: int = 3
     clear_violation_mps: float = 0.05
     # no state telemetry this long while flighttest flies offboard: abort (flighttest.guard "Stale telemetry")
@@ -133,6 +136,7 @@ _RANGES: dict[str, Range] = {
     "takeoff_timeout_s": Range(0.0, MAX_DURATION_S, _S, lo_open=True),
     "connect_timeout_s": Range(0.0, MAX_DURATION_S, _S, lo_open=True),
     "min_battery_percent": Range(0.0, 100.0, "%"),
+    "feedforward_lead_s": Range(0.0, 1.0, _S),
     # [guard]
     "horizon_s": Range(0.0, 5.0, _S),
     "debounce_samples": Range(1, 100, integer=True),

@@ -73,6 +73,9 @@ class VehicleProfile:
     max_speed_mps: float = 12.0
     max_climb_mps: float = 3.0
     yaw_moment_per_thrust_m: float = 0.016
+    # linear drag, N per m/s of air-relative velocity (PX4 SIH's SIH_KDV model; 0 = none). The
+    # autopilot's feed-forward knows nothing of it, so flighttest adds what it costs (feedforward.py)
+    drag_n_per_mps: float = 0.0
     vrs: VrsBoundary = field(default_factory=VrsBoundary)
     path: str = ""
 
@@ -183,6 +186,7 @@ _TOP_OPTIONAL: dict[str, Any] = {
     "max_speed_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
     "max_climb_mps": Range(0.0, 50.0, "m/s", lo_open=True),
     "yaw_moment_per_thrust_m": Range(0.0, 1.0, "m", lo_open=True),
+    "drag_n_per_mps": Range(0.0, 1000.0, "N·s/m"),
 }
 _VRS_FIELDS: dict[str, Any] = {
     "cone_deg": Range(0.0, 90.0, "°", lo_open=True, hi_open=True),

@@ -24,8 +24,8 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
         profile,
         height_m=float(p.get("descent_m", 3.0)),
         # the guard's own bound minus a tracking margin, so the guard stays silent
-        margin_mps=profile.vrs.margin_mps + float(p.get("extra_margin_mps", 0.15)),
-        accel_fraction=float(p.get("accel_fraction", 0.5)),
+        margin_mps=profile.vrs.margin_mps + float(p.get("extra_margin_mps", 0.35)),
+        accel_fraction=float(p.get("accel_fraction", 0.15)),
     )
     return vertical_trajectory(vp, profile.name, profile.mass_kg)
 

@@ -21,6 +21,7 @@ from flighttest.errors import FlighttestError
 from flighttest.profiles import load_profile
 from sitl_fakes import px4
 from sitl_fakes.disturbance import VrsTruth, default_onset_mps
+from sitl_fakes.estimator import EstimateError
 from sitl_fakes.link import Link, PortInUse
 from sitl_fakes.telemetry import Telemetry
 from sitl_fakes.truthlog import TruthLog
@@ -64,6 +65,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sysid", type=int, default=1,
                    help="MAVLink system id (default 1; give two fakes different ids to test vehicle selection)")
     p.add_argument("--duration-s", type=float, default=0.0, help="exit after this long (default: run until stopped)")
+    p.add_argument("--estimate-error", type=float, default=1.0, metavar="SCALE",
+                   help="scales the estimate's offset from the truth (PX4-like height offset and horizontal "
+                        "wander; default 1, 0 = a perfect estimator)")
+    p.add_argument("--telemetry-gap-rate-hz", type=float, default=0.1, metavar="HZ",
+                   help="how often the telemetry goes quiet for 50-100 ms, as real links do "
+                        "(default 0.1 per second; 0 = never)")
 
 
 def _parse_triple(text: str, what: str) -> tuple[float, float, float]:
@@ -93,7 +100,9 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
     if args.physics_hz < 50:
         raise FlighttestError(f"--physics-hz must be ≥ 50 (got {args.physics_hz})")
     for name, value in {"--gust-mps": args.gust_mps, "--gps-delay-s": args.gps_delay_s,
-                        "--truth-rate-hz": args.truth_rate_hz, "--duration-s": args.duration_s}.items():  # fmt: skip
+                        "--truth-rate-hz": args.truth_rate_hz, "--duration-s": args.duration_s,
+                        "--estimate-error": args.estimate_error,
+                        "--telemetry-gap-rate-hz": args.telemetry_gap_rate_hz}.items():  # fmt: skip
         if not (math.isfinite(value) and value >= 0):
             raise FlighttestError(f"{name} must be ≥ 0 (got {value})")
     if not 0 <= args.port < 65536:
@@ -112,6 +121,8 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
         crash_speed_mps=args.crash_speed_mps,
         gps_delay_s=args.gps_delay_s,
         telemetry_hz=args.telemetry_hz,
+        estimate_error=EstimateError().scaled(args.estimate_error),
+        telemetry_gap_rate_hz=args.telemetry_gap_rate_hz,
     )
 
 

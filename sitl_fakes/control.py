@@ -1,28 +1,51 @@
-"""A PX4-like multicopter cascade: position → velocity → acceleration/thrust vector → attitude → rates.
+"""PX4's multicopter cascade, ported: position → velocity → thrust vector → attitude → rates → allocation.
 
-Setpoints follow PX4's trajectory_setpoint semantics: per axis a position, a velocity and an
-acceleration, each NaN when not given. Position error feeds a velocity command, the velocity error a
-PI acceleration command, feed-forwards add on. Tilt is limited with vertical priority, velocity with
-``MPC_*`` limits, rates with the profile, rotor thrusts with the profile (mixer desaturation keeps
-roll/pitch authority first, yaw last), as PX4 does.
+What flighttest sends reaches real PX4 as a ``trajectory_setpoint`` (per axis a position, a velocity
+and an acceleration, NaN when not given) and goes through, in order (PX4 main 2026-03, the firmware of
+``../shared/px4_sih``):
+
+- ``PositionControl``: position P (``MPC_XY_P``, ``MPC_Z_P``) added to the velocity feed-forward, the
+  horizontal part constrained with the position error first; velocity PID (``MPC_*_VEL_P/I/D_ACC``,
+  D on the velocity derivative low-passed at ``MPC_VELD_LP``) added to the acceleration feed-forward;
+  the thrust vector with ``MPC_ACC_DECOUPLE`` (tilt from the horizontal acceleration against gravity
+  only), ``MPC_TILTMAX_AIR``, ``MPC_THR_MIN``/``MPC_THR_MAX`` and the horizontal margin
+  ``MPC_THR_XY_MARG``, in normalised thrust with ``MPC_THR_HOVER``; anti-windup as PX4 does it;
+- ``AttitudeControl``: the thrust axis first, yaw at ``MC_YAW_WEIGHT``, a P law (``MC_ROLL_P`` …)
+  with **no feed-forward of the tilt rate**: a turning thrust vector is followed ``1/MC_ROLL_P``
+  behind (0.25 s with SIH's 4.0), the first lag the reference flights show;
+- ``RateControl``: PID on the (40 Hz-filtered) body rates in normalised torque (``MC_*RATE_P/I/D/K``,
+  the I term shrinking with the error, ``MC_*_INT_LIM``), rates limited to ``MC_*RATE_MAX``;
+- ``ControlAllocationSequentialDesaturation`` with ``MC_AIRMODE`` 0 for a quad X: roll and pitch
+  torques of 1 move each motor by ±1/√2, yaw by ±1; a motor below 0 is desaturated by **cutting roll
+  and pitch**, never by raising the collective. At the low collective of a plunge (motors at 0.13–0.22
+  in ``helix-5m-guard-abort-1``) little torque is left: the second lag the reference flights show.
+
+Motor commands ``u`` ∈ [0, 1] are fractions of the rotor's maximum thrust (SIH: thrust = ``SIH_T_MAX``
+× ``u``, after the motor lag in ``physics``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from flighttest.aero import G_MPS2
 from flighttest.profiles import VehicleProfile
-from sitl_fakes.physics import RigidBodyState
+from sitl_fakes.physics import RigidBodyState, rotate_ned_to_body
 
 NAN = float("nan")
-RATE_GAIN_RP_PER_S = 25.0
-RATE_GAIN_Y_PER_S = 10.0
-RATE_I_GAIN = 5.0
+ROLL_PITCH_MIX = 1.0 / math.sqrt(2.0)  # PX4's normalised quad-X allocation (see module docstring)
+# motor order and signs as PX4's quad X (CA_ROTOR0..3): front-right, rear-left, front-left, rear-right
+ROLL_SIGNS = (-1.0, 1.0, 1.0, -1.0)
+PITCH_SIGNS = (1.0, -1.0, 1.0, -1.0)
+YAW_SIGNS = (1.0, 1.0, -1.0, -1.0)
+GYRO_CUTOFF_HZ = 40.0  # IMU_GYRO_CUTOFF
+DGYRO_CUTOFF_HZ = 20.0  # IMU_DGYRO_CUTOFF
+YAW_HEADROOM = 0.15  # PX4 lets yaw use 15 % above full scale before cutting it
 
 
-def _finite(x: float) -> bool:
+def finite(x: float) -> bool:
     return x == x and x not in (math.inf, -math.inf)
 
 
@@ -39,167 +62,277 @@ class Target:
 
 @dataclass
 class Limits:
-    vel_xy_max_mps: float = 12.0
-    vel_up_max_mps: float = 3.0
-    vel_dn_max_mps: float = 1.5
-    tilt_max_rad: float = math.radians(45.0)
+    """The PX4 parameters the cascade reads (defaults: PX4 SIH quadx, ``../shared/px4_sih``)."""
+
+    vel_xy_max_mps: float = 12.0  # MPC_XY_VEL_MAX
+    vel_up_max_mps: float = 3.0  # MPC_Z_VEL_MAX_UP
+    vel_dn_max_mps: float = 1.5  # MPC_Z_VEL_MAX_DN
+    tilt_max_rad: float = math.radians(45.0)  # MPC_TILTMAX_AIR
     xy_p: float = 0.95
     z_p: float = 1.0
     xy_vel_p: float = 1.8
     xy_vel_i: float = 0.4
+    xy_vel_d: float = 0.2
     z_vel_p: float = 4.0
     z_vel_i: float = 2.0
-    roll_p: float = 6.5
-    yaw_p: float = 2.8
-    tilt_rate_ff_tau_s: float = 0.04  # low-pass of the tilt-rate feed-forward; 0 turns it off
-    yaw_weight: float = 0.4  # MC_YAW_WEIGHT: tilt first, yaw follows at this weight (as PX4)
+    z_vel_d: float = 0.0
+    veld_lp_hz: float = 5.0  # MPC_VELD_LP
+    thr_hover: float = 0.5  # MPC_THR_HOVER (the fake sets the vehicle's true hover thrust)
+    thr_min: float = 0.12  # MPC_THR_MIN
+    thr_max: float = 1.0  # MPC_THR_MAX
+    thr_xy_marg: float = 0.3  # MPC_THR_XY_MARG
+    acc_decouple: bool = True  # MPC_ACC_DECOUPLE
+    roll_p: float = 4.0  # MC_ROLL_P
+    pitch_p: float = 4.0  # MC_PITCH_P
+    yaw_p: float = 2.8  # MC_YAW_P
+    yaw_weight: float = 0.4  # MC_YAW_WEIGHT
+    rate_p: tuple[float, float, float] = (0.15, 0.15, 0.2)  # MC_ROLLRATE_P, MC_PITCHRATE_P, MC_YAWRATE_P
+    rate_i: tuple[float, float, float] = (0.2, 0.2, 0.1)
+    rate_d: tuple[float, float, float] = (0.003, 0.003, 0.0)
+    rate_k: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    rate_int_lim: tuple[float, float, float] = (0.3, 0.3, 0.3)  # MC_RR_INT_LIM, MC_PR_INT_LIM, MC_YR_INT_LIM
+    rate_max_radps: tuple[float, float, float] = (math.radians(220.0), math.radians(220.0), math.radians(200.0))
+
+    @classmethod
+    def from_params(cls, p: Callable[[str], float], profile: VehicleProfile) -> Limits:
+        """The limits PX4 flies with, from its parameters (``p(name)``), within what the vehicle can do."""
+        names = ("MC_ROLLRATE_MAX", "MC_PITCHRATE_MAX", "MC_YAWRATE_MAX")
+        rate_max = tuple(math.radians(min(p(n), r)) for n, r in zip(names, profile.max_rate_dps))
+        return cls(
+            vel_xy_max_mps=min(p("MPC_XY_VEL_MAX"), profile.max_speed_mps),
+            vel_up_max_mps=min(p("MPC_Z_VEL_MAX_UP"), profile.max_climb_mps),
+            vel_dn_max_mps=p("MPC_Z_VEL_MAX_DN"),
+            tilt_max_rad=math.radians(min(p("MPC_TILTMAX_AIR"), profile.max_tilt_deg)),
+            xy_p=p("MPC_XY_P"),
+            z_p=p("MPC_Z_P"),
+            xy_vel_p=p("MPC_XY_VEL_P_ACC"),
+            xy_vel_i=p("MPC_XY_VEL_I_ACC"),
+            xy_vel_d=p("MPC_XY_VEL_D_ACC"),
+            z_vel_p=p("MPC_Z_VEL_P_ACC"),
+            z_vel_i=p("MPC_Z_VEL_I_ACC"),
+            z_vel_d=p("MPC_Z_VEL_D_ACC"),
+            veld_lp_hz=p("MPC_VELD_LP"),
+            thr_hover=min(max(p("MPC_THR_HOVER"), 0.05), 0.95),
+            thr_min=p("MPC_THR_MIN"),
+            thr_max=p("MPC_THR_MAX"),
+            thr_xy_marg=p("MPC_THR_XY_MARG"),
+            acc_decouple=bool(p("MPC_ACC_DECOUPLE")),
+            roll_p=p("MC_ROLL_P"),
+            pitch_p=p("MC_PITCH_P"),
+            yaw_p=p("MC_YAW_P"),
+            yaw_weight=min(max(p("MC_YAW_WEIGHT"), 0.0), 1.0),
+            rate_p=(p("MC_ROLLRATE_P"), p("MC_PITCHRATE_P"), p("MC_YAWRATE_P")),
+            rate_i=(p("MC_ROLLRATE_I"), p("MC_PITCHRATE_I"), p("MC_YAWRATE_I")),
+            rate_d=(p("MC_ROLLRATE_D"), p("MC_PITCHRATE_D"), p("MC_YAWRATE_D")),
+            rate_k=(p("MC_ROLLRATE_K"), p("MC_PITCHRATE_K"), p("MC_YAWRATE_K")),
+            rate_int_lim=(p("MC_RR_INT_LIM"), p("MC_PR_INT_LIM"), p("MC_YR_INT_LIM")),
+            rate_max_radps=rate_max,  # type: ignore[arg-type]
+        )
+
+
+def _constrain_xy(v0: tuple[float, float], v1: tuple[float, float], vmax: float) -> tuple[float, float]:
+    """PX4 ``ControlMath::constrainXY``: ``v0 + s·v1`` within ``vmax``, keeping ``v0`` first."""
+    sx, sy = v0[0] + v1[0], v0[1] + v1[1]
+    if math.hypot(sx, sy) <= vmax:
+        return sx, sy
+    n0 = math.hypot(*v0)
+    if n0 >= vmax:
+        return (v0[0] / n0 * vmax, v0[1] / n0 * vmax) if n0 > 0 else (0.0, 0.0)
+    n1 = math.hypot(*v1)
+    if n1 < 1e-9:
+        return v0
+    # |v0 + s·u1| = vmax along the unit u1, s ≥ 0
+    ux, uy = v1[0] / n1, v1[1] / n1
+    b = v0[0] * ux + v0[1] * uy
+    s = -b + math.sqrt(max(b * b - (n0 * n0 - vmax * vmax), 0.0))
+    return v0[0] + s * ux, v0[1] + s * uy
+
+
+def _limit_tilt(bz: list[float], max_angle: float) -> list[float]:
+    """PX4 ``ControlMath::limitTilt`` against NED down."""
+    dot = min(max(bz[2], -1.0), 1.0)
+    angle = min(math.acos(dot), max_angle)
+    rx, ry = bz[0], bz[1]
+    n = math.hypot(rx, ry)
+    if n < 1e-7:
+        rx, ry, n = 1.0, 0.0, 1.0
+    return [math.sin(angle) * rx / n, math.sin(angle) * ry / n, math.cos(angle)]
 
 
 class Controller:
+    """The cascade's state (integrators, filters) for one vehicle; every gain comes in ``Limits``."""
+
     def __init__(self, profile: VehicleProfile):
         self.profile = profile
-        self.mass_kg = profile.mass_kg
-        self.inertia = profile.inertia_kgm2
-        self.t_min_n = profile.min_thrust_per_rotor_n
         self.t_max_n = profile.max_thrust_per_rotor_n
-        self.rate_max_radps = [math.radians(r) for r in profile.max_rate_dps]
-        self.arm_xy_m = profile.arm_length_m / math.sqrt(2.0)
-        self.k_yaw_m = profile.yaw_moment_per_thrust_m
         self.vel_int = [0.0, 0.0, 0.0]
         self.rate_int = [0.0, 0.0, 0.0]
         self.yaw_hold_rad = 0.0
-        self.last_acc_cmd = (0.0, 0.0, 0.0)
         self.last_collective_n = 0.0
+        self.last_u = [0.0, 0.0, 0.0, 0.0]
+        self._vel_prev: tuple[float, float, float] | None = None
+        self._vel_dot = [0.0, 0.0, 0.0]
+        self._rates_f: list[float] | None = None
+        self._rates_f_prev = [0.0, 0.0, 0.0]
+        self._ang_acc = [0.0, 0.0, 0.0]
 
     def reset(self, s: RigidBodyState) -> None:
         self.vel_int = [0.0, 0.0, 0.0]
         self.rate_int = [0.0, 0.0, 0.0]
         self.yaw_hold_rad = s.yaw_rad()
 
-    # -- outer loops ---------------------------------------------------------------------------------
-    def acceleration_command(self, dt_s: float, s: RigidBodyState, t: Target, lim: Limits):
+    # -- PositionControl -----------------------------------------------------------------------------
+    def thrust_setpoint(self, dt_s: float, s: RigidBodyState, t: Target, lim: Limits):
+        """Body z axis (NED unit vector) and collective thrust (0..1 of the rotors' maximum)."""
         pos = (s.n_m, s.e_m, s.d_m)
         vel = (s.vn_mps, s.ve_mps, s.vd_mps)
-        vcmd = [NAN, NAN, NAN]
+        self._update_vel_dot(dt_s, vel, lim)
+        # position P, added to the velocity feed-forward (NaN-aware, as addIfNotNanVector3f)
+        vsp_pos = [(t.pos[i] - pos[i]) * (lim.z_p if i == 2 else lim.xy_p) if finite(t.pos[i]) else NAN
+                   for i in range(3)]  # fmt: skip
+        vel_sp = [_add_if_not_nan(t.vel[i], vsp_pos[i]) for i in range(3)]
+        p0 = [v if finite(v) else 0.0 for v in vsp_pos]
+        if finite(vel_sp[0]) and finite(vel_sp[1]):
+            vel_sp[0], vel_sp[1] = _constrain_xy(
+                (p0[0], p0[1]), (vel_sp[0] - p0[0], vel_sp[1] - p0[1]), lim.vel_xy_max_mps
+            )
+        if finite(vel_sp[2]):
+            vel_sp[2] = min(max(vel_sp[2], -lim.vel_up_max_mps), lim.vel_dn_max_mps)
+        # velocity PID, added to the acceleration feed-forward
+        self.vel_int[2] = min(max(self.vel_int[2], -G_MPS2), G_MPS2)
+        gp = (lim.xy_vel_p, lim.xy_vel_p, lim.z_vel_p)
+        gi = (lim.xy_vel_i, lim.xy_vel_i, lim.z_vel_i)
+        gd = (lim.xy_vel_d, lim.xy_vel_d, lim.z_vel_d)
+        vel_err = [vel_sp[i] - vel[i] for i in range(3)]
+        acc_sp = [
+            _add_if_not_nan(t.acc[i], vel_err[i] * gp[i] + self.vel_int[i] - self._vel_dot[i] * gd[i]) for i in range(3)
+        ]
+        acc_sp = [a if finite(a) else 0.0 for a in acc_sp]
+        thr = self._acceleration_control(acc_sp, lim)
+        # vertical anti-windup
+        if (thr[2] >= -lim.thr_min and vel_err[2] >= 0.0) or (thr[2] <= -lim.thr_max and vel_err[2] <= 0.0):
+            vel_err[2] = 0.0
+        # vertical priority with a horizontal margin
+        thr_xy = math.hypot(thr[0], thr[1])
+        alloc_h = min(thr_xy, lim.thr_xy_marg)
+        thr[2] = max(thr[2], -math.sqrt(max(lim.thr_max**2 - alloc_h**2, 0.0)))
+        thr_max_xy = math.sqrt(max(lim.thr_max**2 - thr[2] ** 2, 0.0))
+        if thr_xy > thr_max_xy:
+            thr[0], thr[1] = thr[0] / thr_xy * thr_max_xy, thr[1] / thr_xy * thr_max_xy
+        # horizontal tracking anti-windup (Rundqwist)
+        prod = (thr[0] * G_MPS2 / lim.thr_hover, thr[1] * G_MPS2 / lim.thr_hover)
+        lim_xy = prod if acc_sp[0] ** 2 + acc_sp[1] ** 2 > prod[0] ** 2 + prod[1] ** 2 else (acc_sp[0], acc_sp[1])
+        arw = 2.0 / lim.xy_vel_p if lim.xy_vel_p > 0 else 0.0
+        vel_err[0] -= arw * (acc_sp[0] - lim_xy[0])
+        vel_err[1] -= arw * (acc_sp[1] - lim_xy[1])
         for i in range(3):
-            gain = lim.z_p if i == 2 else lim.xy_p
-            if _finite(t.pos[i]):
-                vcmd[i] = gain * (t.pos[i] - pos[i]) + (t.vel[i] if _finite(t.vel[i]) else 0.0)
-            elif _finite(t.vel[i]):
-                vcmd[i] = t.vel[i]
-        if _finite(vcmd[0]) and _finite(vcmd[1]):
-            h = math.hypot(vcmd[0], vcmd[1])
-            if h > lim.vel_xy_max_mps:
-                vcmd[0] *= lim.vel_xy_max_mps / h
-                vcmd[1] *= lim.vel_xy_max_mps / h
-        if _finite(vcmd[2]):
-            vcmd[2] = min(max(vcmd[2], -lim.vel_up_max_mps), lim.vel_dn_max_mps)
-        acc = [0.0, 0.0, 0.0]
+            if finite(vel_err[i]):
+                self.vel_int[i] += vel_err[i] * gi[i] * dt_s
+        norm = math.sqrt(thr[0] ** 2 + thr[1] ** 2 + thr[2] ** 2)
+        if norm < 1e-6:
+            return (0.0, 0.0, 1.0), 0.0
+        return (-thr[0] / norm, -thr[1] / norm, -thr[2] / norm), norm
+
+    def _acceleration_control(self, acc_sp: list[float], lim: Limits) -> list[float]:
+        z_force = -G_MPS2 + (0.0 if lim.acc_decouple else acc_sp[2])
+        n = math.sqrt(acc_sp[0] ** 2 + acc_sp[1] ** 2 + z_force**2)
+        bz = _limit_tilt([-acc_sp[0] / n, -acc_sp[1] / n, -z_force / n], lim.tilt_max_rad)
+        thrust_ned_z = acc_sp[2] * (lim.thr_hover / G_MPS2) - lim.thr_hover
+        collective = min(thrust_ned_z / bz[2], -lim.thr_min)
+        return [bz[0] * collective, bz[1] * collective, bz[2] * collective]
+
+    def _update_vel_dot(self, dt_s: float, vel, lim: Limits) -> None:
+        prev = self._vel_prev
+        self._vel_prev = vel
+        if prev is None or dt_s <= 0:
+            return
+        a = dt_s / (dt_s + 1.0 / (2.0 * math.pi * lim.veld_lp_hz)) if lim.veld_lp_hz > 0 else 1.0
         for i in range(3):
-            ff = t.acc[i] if _finite(t.acc[i]) else 0.0
-            if _finite(vcmd[i]):
-                kp, ki = (lim.z_vel_p, lim.z_vel_i) if i == 2 else (lim.xy_vel_p, lim.xy_vel_i)
-                err = vcmd[i] - vel[i]
-                self.vel_int[i] = min(max(self.vel_int[i] + ki * err * dt_s, -G_MPS2 * 0.6), G_MPS2 * 0.6)
-                acc[i] = kp * err + self.vel_int[i] + ff
-            else:
-                acc[i] = ff
-        return acc
+            self._vel_dot[i] += a * ((vel[i] - prev[i]) / dt_s - self._vel_dot[i])
 
-    def thrust_vector(self, acc, lim: Limits):
-        """Desired body z axis (NED) and collective thrust (N) for an acceleration, tilt-limited."""
-        max_total = 4.0 * self.t_max_n
-        min_total = max(4.0 * self.t_min_n, 0.08 * max_total)
-        m = self.mass_kg
-        fn, fe, fd = acc[0], acc[1], acc[2] - G_MPS2
-        fd = min(fd, -min_total / m)  # keep some upward thrust: no commanded flips
-        fd = max(fd, -max_total / m)
-        h_max = min(-fd * math.tan(lim.tilt_max_rad), math.sqrt(max(0.0, (max_total / m) ** 2 - fd * fd)))
-        h = math.hypot(fn, fe)
-        if h > h_max:
-            fn, fe = fn * h_max / h, fe * h_max / h
-        norm = math.sqrt(fn * fn + fe * fe + fd * fd)
-        return (-fn / norm, -fe / norm, -fd / norm), min(max(m * norm, min_total), max_total)
-
-    # -- inner loops ---------------------------------------------------------------------------------
-    def rotor_thrusts(self, dt_s, s: RigidBodyState, bz, collective_n, yaw_rad, lim: Limits):
-        """Attitude P → rate PI → mixer with desaturation; returns four rotor thrust commands (N)."""
+    # -- AttitudeControl, RateControl, allocation ----------------------------------------------------
+    def rotor_thrusts(self, dt_s, s: RigidBodyState, bz, collective, yaw_rad, lim: Limits):
+        """Four rotor thrust commands (N) for a thrust axis and a collective (0..1)."""
         q = (s.qw, s.qx, s.qy, s.qz)
         qd = _reduced_attitude_setpoint(q, _quat_from_z_and_yaw(bz, yaw_rad), lim.yaw_weight)
-        # error quaternion q_e = q⁻¹ ⊗ q_d, canonical (shortest way round)
         ew, ex, ey, ez = _qmul(_qconj(q), qd)
         if ew < 0.0:
             ex, ey, ez = -ex, -ey, -ez
         yaw_gain = lim.yaw_p / lim.yaw_weight if lim.yaw_weight > 1e-4 else lim.yaw_p
-        rate_sp = [2.0 * lim.roll_p * ex, 2.0 * lim.roll_p * ey, 2.0 * yaw_gain * ez]
-        ff = self._tilt_rate_feedforward(dt_s, q, bz, lim)
-        rate_sp = [rate_sp[0] + ff[0], rate_sp[1] + ff[1], rate_sp[2]]
+        rate_sp = [2.0 * lim.roll_p * ex, 2.0 * lim.pitch_p * ey, 2.0 * yaw_gain * ez]
         for i in range(3):
-            r = self.rate_max_radps[i]
+            r = lim.rate_max_radps[i]
             rate_sp[i] = min(max(rate_sp[i], -r), r)
-        rates = (s.p_radps, s.q_radps, s.r_radps)
-        ixx, iyy, izz = self.inertia
-        moments = []
-        for i, (inertia, gain) in enumerate(
-            ((ixx, RATE_GAIN_RP_PER_S), (iyy, RATE_GAIN_RP_PER_S), (izz, RATE_GAIN_Y_PER_S))
-        ):
+        rates = self._filtered_rates(dt_s, (s.p_radps, s.q_radps, s.r_radps))
+        torque = []
+        for i in range(3):
+            k = lim.rate_k[i]
             err = rate_sp[i] - rates[i]
-            self.rate_int[i] = min(max(self.rate_int[i] + RATE_I_GAIN * err * dt_s, -3.0), 3.0)
-            moments.append(inertia * (gain * err + self.rate_int[i]))
-        self.last_collective_n = collective_n
-        return self.mix(collective_n, moments[0], moments[1], moments[2])
+            torque.append(k * lim.rate_p[i] * err + self.rate_int[i] - k * lim.rate_d[i] * self._ang_acc[i])
+            i_factor = max(0.0, 1.0 - (err / math.radians(400.0)) ** 2)
+            self.rate_int[i] = min(max(self.rate_int[i] + i_factor * k * lim.rate_i[i] * err * dt_s,
+                                       -lim.rate_int_lim[i]), lim.rate_int_lim[i])  # fmt: skip
+        self.last_collective_n = collective * 4.0 * self.t_max_n
+        u = allocate(collective, torque[0], torque[1], torque[2])
+        self.last_u = u
+        return [x * self.t_max_n for x in u]
 
-    def _tilt_rate_feedforward(self, dt_s, q, bz, lim: Limits):
-        """Body rates (FRD) that turn the thrust axis as fast as its setpoint turns: ``ḃ_z × b_z``
-        in the world frame, from the setpoint's change per step, low-passed (the setpoint arrives in
-        steps at the offboard rate). Without it the attitude loop trails a turning thrust vector by
-        ``rate / MC_ROLL_P`` and a helix is flown with a persistent acceleration error."""
-        prev = self._bz_prev
-        self._bz_prev = bz
-        if prev is None or lim.tilt_rate_ff_tau_s <= 0:
-            return (0.0, 0.0)
-        dn, de, dd = ((bz[i] - prev[i]) / dt_s for i in range(3))
-        wn = bz[1] * dd - bz[2] * de
-        we = bz[2] * dn - bz[0] * dd
-        wd = bz[0] * de - bz[1] * dn
-        a = dt_s / (lim.tilt_rate_ff_tau_s + dt_s)
-        f = self._ff_world
-        self._ff_world = (f[0] + a * (wn - f[0]), f[1] + a * (we - f[1]), f[2] + a * (wd - f[2]))
-        # world → body: R(q)ᵀ v
-        bx, by, _ = _rotate_ned_to_body(q, self._ff_world)
-        return (bx, by)
+    def _filtered_rates(self, dt_s: float, rates):
+        if self._rates_f is None:
+            self._rates_f = list(rates)
+            self._rates_f_prev = list(rates)
+            return self._rates_f
+        a = dt_s / (dt_s + 1.0 / (2.0 * math.pi * GYRO_CUTOFF_HZ))
+        b = dt_s / (dt_s + 1.0 / (2.0 * math.pi * DGYRO_CUTOFF_HZ))
+        for i in range(3):
+            prev = self._rates_f[i]
+            self._rates_f[i] += a * (rates[i] - prev)
+            self._ang_acc[i] += b * ((self._rates_f[i] - prev) / dt_s - self._ang_acc[i])
+        return self._rates_f
 
-    _bz_prev = None
-    _ff_world = (0.0, 0.0, 0.0)
 
-    def mix(self, collective_n, mx, my, mz):
-        a, k = self.arm_xy_m, self.k_yaw_m
-        rp = (
-            (-mx + my) / (4 * a),
-            (mx - my) / (4 * a),
-            (mx + my) / (4 * a),
-            (-mx - my) / (4 * a),
-        )
-        yw = (mz / (4 * k), mz / (4 * k), -mz / (4 * k), -mz / (4 * k))
-        lo_t, hi_t = self.t_min_n, self.t_max_n
-        base = collective_n / 4.0
-        lo, hi = min(rp), max(rp)
-        span = hi_t - lo_t
-        scale = 1.0
-        if hi - lo > span:  # roll/pitch alone saturate: keep their ratio, drop the collective request
-            scale = span / (hi - lo)
-            base = lo_t - lo * scale
-        else:
-            base = min(max(base, lo_t - lo), hi_t - hi)
-        out = [base + scale * r for r in rp]
-        # yaw last: as much as fits
-        ys = 1.0
-        for o, y in zip(out, yw):
-            if y > 0 and o + y > hi_t:
-                ys = min(ys, max(0.0, (hi_t - o) / y))
-            elif y < 0 and o + y < lo_t:
-                ys = min(ys, max(0.0, (lo_t - o) / y))
-        return [min(max(o + ys * y, lo_t), hi_t) for o, y in zip(out, yw)]
+def _add_if_not_nan(setpoint: float, addition: float) -> float:
+    if finite(setpoint) and finite(addition):
+        return setpoint + addition
+    return addition if not finite(setpoint) else setpoint
+
+
+def _desaturation_gain(vec, sp, lo: float, hi: float) -> float:
+    k_min = k_max = 0.0
+    for v, x in zip(vec, sp):
+        if abs(v) < 0.2:
+            continue
+        if x < lo:
+            k = (lo - x) / v
+            k_min, k_max = min(k_min, k), max(k_max, k)
+        if x > hi:
+            k = (hi - x) / v
+            k_min, k_max = min(k_min, k), max(k_max, k)
+    return k_min + k_max
+
+
+def _desaturate(sp: list[float], vec, lo: float, hi: float, reduce_only: bool = False) -> None:
+    for factor in (1.0, 0.5):
+        gain = factor * _desaturation_gain(vec, sp, lo, hi)
+        if reduce_only and gain > 0.0:
+            return
+        for i in range(4):
+            sp[i] += gain * vec[i]
+
+
+def allocate(collective: float, roll: float, pitch: float, yaw: float) -> list[float]:
+    """PX4's sequential desaturation with airmode off: motor commands 0..1 from a collective (0..1)
+    and normalised torques. Thrust may only be cut to fit; roll and pitch are cut next; yaw last."""
+    sp = [collective + ROLL_PITCH_MIX * (ROLL_SIGNS[i] * roll + PITCH_SIGNS[i] * pitch) for i in range(4)]
+    ones = (1.0, 1.0, 1.0, 1.0)
+    _desaturate(sp, ones, 0.0, 1.0, reduce_only=True)
+    _desaturate(sp, [ROLL_PITCH_MIX * r for r in ROLL_SIGNS], 0.0, 1.0)
+    _desaturate(sp, [ROLL_PITCH_MIX * p for p in PITCH_SIGNS], 0.0, 1.0)
+    for i in range(4):
+        sp[i] += YAW_SIGNS[i] * yaw
+    _desaturate(sp, YAW_SIGNS, 0.0, 1.0 + YAW_HEADROOM)
+    _desaturate(sp, ones, 0.0, 1.0, reduce_only=True)
+    return [min(max(x, 0.0), 1.0) for x in sp]
 
 
 def _qmul(a, b):
@@ -210,16 +343,6 @@ def _qmul(a, b):
         aw * bx + ax * bw + ay * bz - az * by,
         aw * by - ax * bz + ay * bw + az * bx,
         aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def _rotate_ned_to_body(q, v):
-    w, x, y, z = q
-    vx, vy, vz = v
-    return (
-        (1 - 2 * (y * y + z * z)) * vx + 2 * (x * y + w * z) * vy + 2 * (x * z - w * y) * vz,
-        2 * (x * y - w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z + w * x) * vz,
-        2 * (x * z + w * y) * vx + 2 * (y * z - w * x) * vy + (1 - 2 * (x * x + y * y)) * vz,
     )
 
 
@@ -255,7 +378,7 @@ def _quat_from_z_and_yaw(bz, yaw_rad):
     zx, zy, zz = bz
     cx, cy = math.cos(yaw_rad), math.sin(yaw_rad)
     # body y = z × x_c
-    yx, yy, yz = zy * 0.0 - zz * cy, zz * cx - zx * 0.0, zx * cy - zy * cx
+    yx, yy, yz = -zz * cy, zz * cx, zx * cy - zy * cx
     n = math.sqrt(yx * yx + yy * yy + yz * yz)
     yx, yy, yz = yx / n, yy / n, yz / n
     # body x = y × z
@@ -274,3 +397,6 @@ def _quat_from_z_and_yaw(bz, yaw_rad):
         return ((zx - xz) / sq, (yx + xy) / sq, 0.25 * sq, (zy + yz) / sq)
     sq = math.sqrt(1.0 + r22 - r00 - r11) * 2
     return ((xy - yx) / sq, (zx + xz) / sq, (zy + yz) / sq, 0.25 * sq)
+
+
+__all__ = ["NAN", "Controller", "Limits", "Target", "allocate", "finite", "rotate_ned_to_body"]

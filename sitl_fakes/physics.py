@@ -1,4 +1,5 @@
-"""Rigid-body quadcopter: quaternion attitude, four rotor thrusts with motor lag, drag, ground contact.
+"""Rigid-body quadcopter as PX4's SIH: quaternion attitude, four rotor thrusts with motor lag, linear drag,
+ground contact.
 
 Plain-float arithmetic on purpose: at 250 Hz a 3-vector through numpy costs more than the maths.
 Frames as in NOTES §1: NED inertial, FRD body, ``q = (w, x, y, z)`` rotates body → NED.
@@ -14,7 +15,11 @@ from dataclasses import dataclass, field
 from flighttest.aero import G_MPS2
 from flighttest.profiles import VehicleProfile
 
-MOTOR_TIME_CONSTANT_S = 0.03
+# PX4 SIH's defaults (../shared/px4_sih): motor time constant SIH_T_TAU and rotational damping SIH_KDW
+# (N m per rad/s). Linear drag (SIH_KDV, N per m/s of air-relative velocity) is the profile's
+# drag_n_per_mps: SIH's model, which the autopilot's feed-forward does not know.
+MOTOR_TIME_CONSTANT_S = 0.05
+ROT_DAMPING_NM_PER_RADPS = 0.025
 # rotor i: (x sign, y sign, spin sign: +1 CCW)
 ROTOR_LAYOUT = ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0))
 
@@ -76,16 +81,15 @@ class QuadBody:
         self.arm_xy_m = profile.arm_length_m / math.sqrt(2.0)
         self.k_yaw_m = profile.yaw_moment_per_thrust_m
         self.max_thrust_n = profile.max_thrust_per_rotor_n
-        # quadratic drag that balances the weight at max tilt and max speed: a profile-consistent guess
-        self.drag_coeff_kgpm = (
-            profile.mass_kg * G_MPS2 * math.tan(math.radians(profile.max_tilt_deg)) / profile.max_speed_mps**2
-        )
+        self.motor_tau_s = MOTOR_TIME_CONSTANT_S
+        self.drag_n_per_mps = profile.drag_n_per_mps
+        self.rot_damping = ROT_DAMPING_NM_PER_RADPS
         self.state = RigidBodyState()
 
     def step(self, dt_s, thrust_cmd_n, thrust_factor, wind_ned) -> float:
         """Advance by ``dt_s``; returns the downward speed at ground contact (0 if none this step)."""
         s = self.state
-        alpha = dt_s / (MOTOR_TIME_CONSTANT_S + dt_s)
+        alpha = dt_s / (self.motor_tau_s + dt_s)
         thrusts = s.thrust_n
         for i in range(4):
             thrusts[i] += alpha * (thrust_cmd_n[i] * thrust_factor[i] - thrusts[i])
@@ -101,8 +105,7 @@ class QuadBody:
         qw, qx, qy, qz = s.qw, s.qx, s.qy, s.qz
         fn, fe, fd = rotate_body_to_ned(qw, qx, qy, qz, 0.0, 0.0, -total)
         van, vae, vad = s.vn_mps - wind_ned[0], s.ve_mps - wind_ned[1], s.vd_mps - wind_ned[2]
-        vair = math.sqrt(van * van + vae * vae + vad * vad)
-        c = self.drag_coeff_kgpm * vair
+        c = self.drag_n_per_mps
         m = self.mass_kg
         an = (fn - c * van) / m
         ae = (fe - c * vae) / m
@@ -110,9 +113,10 @@ class QuadBody:
 
         # Euler's equations, body frame
         p, q, r = s.p_radps, s.q_radps, s.r_radps
-        pd = (mx - (self.izz - self.iyy) * q * r) / self.ixx
-        qd = (my - (self.ixx - self.izz) * p * r) / self.iyy
-        rd = (mz - (self.iyy - self.ixx) * p * q) / self.izz
+        kw = self.rot_damping
+        pd = (mx - kw * p - (self.izz - self.iyy) * q * r) / self.ixx
+        qd = (my - kw * q - (self.ixx - self.izz) * p * r) / self.iyy
+        rd = (mz - kw * r - (self.iyy - self.ixx) * p * q) / self.izz
 
         contact_speed = 0.0
         if s.on_ground:

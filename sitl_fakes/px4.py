@@ -46,7 +46,8 @@ class Param:
 
 
 def default_params() -> dict[str, Param]:
-    """PX4 v1.14/1.15 defaults of what flighttest reads or the fake itself uses."""
+    """PX4's defaults (SIH quadx airframe, PX4 main as in ../shared/px4_sih) of what flighttest reads or
+    the fake itself flies with."""
     f, i = PARAM_REAL32, PARAM_INT32
     return {
         "MIS_TAKEOFF_ALT": Param(2.5, f),
@@ -68,8 +69,33 @@ def default_params() -> dict[str, Param]:
         "MPC_Z_VEL_P_ACC": Param(4.0, f),
         "MPC_Z_VEL_I_ACC": Param(2.0, f),
         "MPC_ACC_HOR": Param(3.0, f),
-        "MC_ROLL_P": Param(6.5, f),
-        "MC_PITCH_P": Param(6.5, f),
+        "MPC_XY_VEL_D_ACC": Param(0.2, f),
+        "MPC_Z_VEL_D_ACC": Param(0.0, f),
+        "MPC_VELD_LP": Param(5.0, f),
+        "MPC_THR_HOVER": Param(0.5, f),  # the fake sets the vehicle's true hover thrust at boot
+        "MPC_THR_MIN": Param(0.12, f),
+        "MPC_THR_MAX": Param(1.0, f),
+        "MPC_THR_XY_MARG": Param(0.3, f),
+        "MPC_ACC_DECOUPLE": Param(1, i),
+        "MPC_Z_V_AUTO_DN": Param(1.5, f),
+        "MC_AIRMODE": Param(0, i),  # the fake's allocation is airmode-off only
+        "MC_ROLL_P": Param(4.0, f),
+        "MC_PITCH_P": Param(4.0, f),
+        "MC_ROLLRATE_P": Param(0.15, f),
+        "MC_PITCHRATE_P": Param(0.15, f),
+        "MC_YAWRATE_P": Param(0.2, f),
+        "MC_ROLLRATE_I": Param(0.2, f),
+        "MC_PITCHRATE_I": Param(0.2, f),
+        "MC_YAWRATE_I": Param(0.1, f),
+        "MC_ROLLRATE_D": Param(0.003, f),
+        "MC_PITCHRATE_D": Param(0.003, f),
+        "MC_YAWRATE_D": Param(0.0, f),
+        "MC_ROLLRATE_K": Param(1.0, f),
+        "MC_PITCHRATE_K": Param(1.0, f),
+        "MC_YAWRATE_K": Param(1.0, f),
+        "MC_RR_INT_LIM": Param(0.3, f),
+        "MC_PR_INT_LIM": Param(0.3, f),
+        "MC_YR_INT_LIM": Param(0.3, f),
         "MC_YAW_P": Param(2.8, f),
         "MC_YAW_WEIGHT": Param(0.4, f),
         "MC_ROLLRATE_MAX": Param(220.0, f),
@@ -77,7 +103,7 @@ def default_params() -> dict[str, Param]:
         "MC_YAWRATE_MAX": Param(200.0, f),
         "RTL_RETURN_ALT": Param(30.0, f),
         "NAV_DLL_ACT": Param(0, i),
-        "SYS_AUTOSTART": Param(4001, i),
+        "SYS_AUTOSTART": Param(10040, i),  # sihsim_quadx
         "MAV_SYS_ID": Param(1, i),
     }
 

@@ -1,12 +1,18 @@
 """Telemetry streams at PX4-like default rates, changeable with SET_MESSAGE_INTERVAL (511).
 
-The estimate the fake reports *is* the truth (a perfect EKF): flighttest sees exactly what the truth
-log records, at the stream's rate. Each builder reads the vehicle and returns one MAVLink message.
+Position and velocity are the vehicle's *estimate* (``sitl_fakes.estimator``: offset from the truth as
+PX4's EKF is); attitude, rates, GPS and the barometer are the truth's. Each builder reads the vehicle
+and returns one MAVLink message.
+
+Like a real link, the streams go quiet now and then: gaps of ``telemetry_gap_s`` (50–100 ms) at
+``telemetry_gap_rate_hz`` (seeded), in which nothing is sent — what PX4 SITL on a loaded machine and
+a flying process that stalls deliver (``../shared/px4_sih``: 60–85 ms gaps among 20 ms periods).
 """
 
 from __future__ import annotations
 
 import math
+import random
 import time
 
 from flighttest.aero import G_MPS2
@@ -96,6 +102,13 @@ class Telemetry:
         self.truth_interval_s = 1.0 / truth_rate_hz if truth_rate_hz > 0 else 0.0
         self.truth_next = vehicle.t0
         self.sent = 0
+        cfg = vehicle.cfg
+        self._gap_rng = random.Random(cfg.seed * 104729 + 3)
+        self._gap_rate_hz = cfg.telemetry_gap_rate_hz
+        self._gap_s = cfg.telemetry_gap_s
+        self._gap_until = -math.inf
+        self._last_tick = vehicle.t0
+        self.gaps = 0
 
     # -- scheduling ----------------------------------------------------------------------------------
     def can_send(self, msg_id: int) -> bool:
@@ -128,8 +141,21 @@ class Telemetry:
             return True
         return False
 
+    def _in_gap(self, now: float) -> bool:
+        dt = now - self._last_tick
+        self._last_tick = now
+        if now < self._gap_until:
+            return True
+        if self._gap_rate_hz > 0 and self._gap_rng.random() < self._gap_rate_hz * dt:
+            self._gap_until = now + self._gap_rng.uniform(*self._gap_s)
+            self.gaps += 1
+            return True
+        return False
+
     def tick(self, now: float) -> None:
         v = self.v
+        if self._in_gap(now):
+            return
         if v.heartbeat_due:
             v.heartbeat_due = False
             self.send_now(M.MAVLINK_MSG_ID_HEARTBEAT)
@@ -190,10 +216,8 @@ class Telemetry:
         return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_MC, landed)
 
     def local_position_ned(self):
-        s = self.v.body.state
-        return M.MAVLink_local_position_ned_message(
-            self.boot_ms(), s.n_m, s.e_m, s.d_m, s.vn_mps, s.ve_mps, s.vd_mps
-        )
+        s = self.v.est
+        return M.MAVLink_local_position_ned_message(self.boot_ms(), s.n_m, s.e_m, s.d_m, s.vn_mps, s.ve_mps, s.vd_mps)
 
     def attitude_quaternion(self):
         s = self.v.body.state
@@ -202,7 +226,7 @@ class Telemetry:
         )
 
     def odometry(self):
-        s = self.v.body.state
+        s = self.v.est
         # PX4 sends pose in LOCAL_NED and velocity in the body frame (child frame BODY_FRD)
         bx, by, bz = rotate_ned_to_body(s.qw, s.qx, s.qy, s.qz, s.vn_mps, s.ve_mps, s.vd_mps)
         nan21 = [math.nan] * 21
@@ -216,9 +240,7 @@ class Telemetry:
         s = self.v.body.state
         roll = math.atan2(2 * (s.qw * s.qx + s.qy * s.qz), 1 - 2 * (s.qx**2 + s.qy**2))
         pitch = math.asin(max(-1.0, min(1.0, 2 * (s.qw * s.qy - s.qz * s.qx))))
-        return M.MAVLink_attitude_message(
-            self.boot_ms(), roll, pitch, s.yaw_rad(), s.p_radps, s.q_radps, s.r_radps
-        )
+        return M.MAVLink_attitude_message(self.boot_ms(), roll, pitch, s.yaw_rad(), s.p_radps, s.q_radps, s.r_radps)
 
     def _global(self, n_m: float, e_m: float) -> tuple[int, int]:
         cfg = self.v.cfg
@@ -227,7 +249,7 @@ class Telemetry:
         return round(lat * 1e7), round(lon * 1e7)
 
     def global_position_int(self):
-        s = self.v.body.state
+        s = self.v.est
         lat, lon = self._global(s.n_m, s.e_m)
         hdg = round(math.degrees(s.yaw_rad()) % 360.0 * 100) % 36000
         return M.MAVLink_global_position_int_message(
@@ -285,12 +307,10 @@ class Telemetry:
 
     def wind_cov(self):
         w = self.v.wind.ned
-        return M.MAVLink_wind_cov_message(
-            self.boot_us(), w[0], w[1], w[2], 0.1, 0.05, -self.v.body.state.d_m, 0.3, 0.2
-        )
+        return M.MAVLink_wind_cov_message(self.boot_us(), w[0], w[1], w[2], 0.1, 0.05, -self.v.body.state.d_m, 0.3, 0.2)
 
     def vfr_hud(self):
-        s = self.v.body.state
+        s = self.v.est
         throttle = int(100 * sum(self._motor_outputs()) / 4)
         hdg = int(math.degrees(s.yaw_rad()) % 360.0)
         return M.MAVLink_vfr_hud_message(

@@ -8,13 +8,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from flighttest.aero import G_MPS2
 from flighttest.profiles import VehicleProfile
 from sitl_fakes import px4
-from sitl_fakes.control import NAN, Controller, Limits, Target, _finite
+from sitl_fakes.control import NAN, Controller, Limits, Target, finite
 from sitl_fakes.disturbance import Disturbance, VrsTruth
+from sitl_fakes.estimator import EstimateError, Estimator
 from sitl_fakes.link import Link, mavlink
 from sitl_fakes.physics import QuadBody
 from sitl_fakes.px4 import Mode
@@ -54,6 +55,10 @@ class FakeConfig:
     home_lon_deg: float = 8.545594
     home_alt_m: float = 488.0
     telemetry_hz: float = 50.0
+    estimate_error: EstimateError = field(default_factory=EstimateError)
+    # telemetry gaps as a loaded machine and PX4's own scheduling make them (sitl_fakes.telemetry)
+    telemetry_gap_rate_hz: float = 0.1
+    telemetry_gap_s: tuple[float, float] = (0.05, 0.1)
 
 
 class FakePx4:
@@ -66,10 +71,15 @@ class FakePx4:
         self.profile = cfg.profile
         self.body = QuadBody(cfg.profile)
         self.ctrl = Controller(cfg.profile)
+        self.estimator = Estimator(cfg.estimate_error, cfg.seed)
+        self.est = self.estimator.estimate(self.body.state)
         self.dist = Disturbance(cfg.truth)
         self.wind = Wind(cfg.wind_ned, cfg.gust_mps, cfg.seed)
         self.params = px4.default_params()
         self.params["MPC_TILTMAX_AIR"].value = min(45.0, cfg.profile.max_tilt_deg)
+        # PX4's hover-thrust estimator converges within seconds: start it at the vehicle's truth
+        prof = cfg.profile
+        self.params["MPC_THR_HOVER"].value = prof.mass_kg * G_MPS2 / (prof.n_rotors * prof.max_thrust_per_rotor_n)
         self.param_names = sorted(self.params)
         self.mode = Mode.HOLD
         self.armed = False
@@ -107,22 +117,7 @@ class FakePx4:
         return float(self.params[name].value)
 
     def limits(self) -> Limits:
-        prof = self.profile
-        return Limits(
-            vel_xy_max_mps=min(self.p("MPC_XY_VEL_MAX"), prof.max_speed_mps),
-            vel_up_max_mps=min(self.p("MPC_Z_VEL_MAX_UP"), prof.max_climb_mps),
-            vel_dn_max_mps=self.p("MPC_Z_VEL_MAX_DN"),
-            tilt_max_rad=math.radians(min(self.p("MPC_TILTMAX_AIR"), prof.max_tilt_deg)),
-            xy_p=self.p("MPC_XY_P"),
-            z_p=self.p("MPC_Z_P"),
-            xy_vel_p=self.p("MPC_XY_VEL_P_ACC"),
-            xy_vel_i=self.p("MPC_XY_VEL_I_ACC"),
-            z_vel_p=self.p("MPC_Z_VEL_P_ACC"),
-            z_vel_i=self.p("MPC_Z_VEL_I_ACC"),
-            roll_p=self.p("MC_ROLL_P"),
-            yaw_p=self.p("MC_YAW_P"),
-            yaw_weight=min(max(self.p("MC_YAW_WEIGHT"), 0.0), 1.0),
-        )
+        return Limits.from_params(self.p, self.profile)
 
     def event(self, kind: str, detail: str, severity: int | None = None) -> None:
         self.log.row(self.now, kind, self.mode.name, self.armed, self.landed(), self.body.state, detail=detail)
@@ -141,12 +136,12 @@ class FakePx4:
         if mode is Mode.HOLD:
             self._hold_here()
         elif mode is Mode.TAKEOFF:
-            s = self.body.state
+            s = self.est
             self.target = Target(pos=[s.n_m, s.e_m, -self.takeoff_alt_m], yaw_rad=s.yaw_rad())
         self.event("mode", f"{old.name}->{mode.name} ({why})")
 
     def _hold_here(self) -> None:
-        s = self.body.state
+        s = self.est
         # stop where braking at a moderate deceleration ends, as PX4's hold does
         brake = 0.5 / 2.0
         self.hold_target = Target(
@@ -175,6 +170,8 @@ class FakePx4:
     def step(self, dt_s: float, now: float) -> None:
         self.now = now
         s = self.body.state
+        self.estimator.step(dt_s)
+        self.est = self.estimator.estimate(s)
         self._supervise()
         if self.armed and not self.crashed:
             self.thrust_cmd = self._control(dt_s)
@@ -210,7 +207,7 @@ class FakePx4:
 
     def _supervise(self) -> None:
         """Failsafes and automatic transitions: offboard loss, takeoff done, auto-disarm."""
-        s = self.body.state
+        s = self.est
         if self.mode is Mode.OFFBOARD and self.now - self.last_sp_time > self.p("COM_OF_LOSS_T"):
             self._offboard_lost()
         if self.mode is Mode.TAKEOFF and -s.d_m >= self.takeoff_alt_m - TAKEOFF_ACCEPT_M:
@@ -218,7 +215,7 @@ class FakePx4:
             self.hold_target = Target(pos=[s.n_m, s.e_m, -self.takeoff_alt_m], yaw_rad=s.yaw_rad())
         if self.mode is Mode.RTL and self.rtl_phase == "return" and math.hypot(s.n_m, s.e_m) < RTL_ACCEPT_M:
             self.set_mode(Mode.LAND, "RTL: home reached")
-        if self.armed and s.on_ground:
+        if self.armed and self.body.state.on_ground:
             if not self.has_flown and self.now - self.arm_time > self.p("COM_DISARM_PRFLT") > 0:
                 self.disarm("no takeoff within COM_DISARM_PRFLT")
             elif self.has_flown and self.now - self.ground_since > self.p("COM_DISARM_LAND") > 0:
@@ -246,12 +243,12 @@ class FakePx4:
 
     def _start_rtl(self, why: str) -> None:
         self.rtl_phase = "return"
-        s = self.body.state
+        s = self.est
         self.set_mode(Mode.RTL, why)
         self.target = Target(pos=[0.0, 0.0, min(s.d_m, -2.0)], yaw_rad=s.yaw_rad())
 
     def _control(self, dt_s: float) -> list[float]:
-        s = self.body.state
+        s = self.est  # PX4 flies its estimate; attitude and rates are the truth's
         lim = self.limits()
         mode = self.mode
         idle = IDLE_THRUST_FRACTION * self.profile.max_thrust_per_rotor_n
@@ -259,11 +256,10 @@ class FakePx4:
             (qw, qx, qy, qz), thrust = self.offboard_attitude
             bz = (2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy))
             yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-            collective = thrust * 4.0 * self.profile.max_thrust_per_rotor_n
             self.active_sp = None
-            if s.on_ground and collective < self.profile.mass_kg * G_MPS2:
-                return [max(idle, collective / 4.0)] * 4
-            return self.ctrl.rotor_thrusts(dt_s, s, bz, collective, yaw, lim)
+            if s.on_ground and thrust < lim.thr_hover:
+                return [max(idle, thrust * self.profile.max_thrust_per_rotor_n)] * 4
+            return self.ctrl.rotor_thrusts(dt_s, s, bz, thrust, yaw, lim)
         if mode is Mode.OFFBOARD and self.offboard_sp is not None:
             target = self.offboard_sp
             self.active_sp = (self.offboard_source, self.offboard_mask, target)
@@ -281,7 +277,7 @@ class FakePx4:
             if s.on_ground:
                 self.ctrl.reset(s)
                 return [idle] * 4
-            if not _finite(self.hold_target.pos[0]):
+            if not finite(self.hold_target.pos[0]):
                 self._hold_here()
             target = Target(pos=[self.hold_target.pos[0], self.hold_target.pos[1], NAN],
                             vel=[NAN, NAN, self.p("MPC_LAND_SPEED")], yaw_rad=self.hold_target.yaw_rad)  # fmt: skip
@@ -292,13 +288,12 @@ class FakePx4:
             self.active_sp = ("rtl", 0, target)
         else:
             target = self.hold_target
-        acc = self.ctrl.acceleration_command(dt_s, s, target, lim)
-        bz, collective = self.ctrl.thrust_vector(acc, lim)
+        bz, collective = self.ctrl.thrust_setpoint(dt_s, s, target, lim)
         yaw = target.yaw_rad
-        if _finite(target.yaw_rate_radps) and not _finite(yaw):
+        if finite(target.yaw_rate_radps) and not finite(yaw):
             self.ctrl.yaw_hold_rad += target.yaw_rate_radps * dt_s
             yaw = self.ctrl.yaw_hold_rad
-        elif _finite(yaw):
+        elif finite(yaw):
             self.ctrl.yaw_hold_rad = yaw
         else:
             yaw = self.ctrl.yaw_hold_rad
@@ -323,9 +318,7 @@ class FakePx4:
 
     def _ack(self, msg, command: int, result: int) -> None:
         self.link.send(
-            mavlink.MAVLink_command_ack_message(
-                command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
-            )
+            mavlink.MAVLink_command_ack_message(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
         )
 
     def _on_command_long(self, msg, addr) -> None:
@@ -373,19 +366,19 @@ class FakePx4:
         if cmd == mavlink.MAV_CMD_DO_SET_MODE:
             return self._cmd_set_mode(p)
         if cmd == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            if not (_finite(p[0]) and _finite(p[1])):
+            if not (finite(p[0]) and finite(p[1])):
                 return DENIED, "message id and interval must be numbers"
             return self.telemetry.set_interval(int(p[0]), p[1])
         if cmd == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            ok = _finite(p[0]) and self.telemetry.can_send(int(p[0]))
+            ok = finite(p[0]) and self.telemetry.can_send(int(p[0]))
             return (ACCEPTED, "") if ok else (UNSUPPORTED, "unknown message")
         if cmd in (mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mavlink.MAV_CMD_GET_HOME_POSITION):
             return ACCEPTED, ""
         return UNSUPPORTED, "not implemented by the fake"
 
     def _cmd_arm(self, p) -> tuple[int, str]:
-        want = _finite(p[0]) and p[0] >= 0.5
-        force = _finite(p[1]) and int(p[1]) == FORCE_ARM_MAGIC
+        want = finite(p[0]) and p[0] >= 0.5
+        force = finite(p[1]) and int(p[1]) == FORCE_ARM_MAGIC
         if want:
             if self.armed:
                 return ACCEPTED, "already armed"
@@ -414,18 +407,18 @@ class FakePx4:
         if self.mode is Mode.TAKEOFF:
             return ACCEPTED, "already taking off"
         alt_amsl = p[6]
-        if _finite(alt_amsl):
+        if finite(alt_amsl):
             alt = alt_amsl - self.cfg.home_alt_m
         else:
             alt = self.p("MIS_TAKEOFF_ALT")
-        s = self.body.state
+        s = self.est
         self.takeoff_alt_m = max(alt, -s.d_m, 0.5)
         self.set_mode(Mode.TAKEOFF, "NAV_TAKEOFF")
         return ACCEPTED, f"alt={self.takeoff_alt_m:.2f}"
 
     def _cmd_set_mode(self, p) -> tuple[int, str]:
-        main = int(p[1]) if _finite(p[1]) else -1
-        sub = int(p[2]) if _finite(p[2]) else 0
+        main = int(p[1]) if finite(p[1]) else -1
+        sub = int(p[2]) if finite(p[2]) else 0
         mode = Mode.from_main_sub(main, sub)
         if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_TAKEOFF:
             return self._cmd_takeoff((NAN,) * 7)
@@ -454,7 +447,7 @@ class FakePx4:
             return
         mask = msg.type_mask
         frame = msg.coordinate_frame
-        s = self.body.state
+        s = self.est
         pos = [msg.x, msg.y, msg.z] if not mask & POSITION_IGNORE else [NAN, NAN, NAN]
         vel = [msg.vx, msg.vy, msg.vz] if not mask & VELOCITY_IGNORE else [NAN, NAN, NAN]
         acc = [msg.afx, msg.afy, msg.afz] if not (mask & ACCEL_IGNORE or mask & FORCE_SET) else [NAN, NAN, NAN]

@@ -89,7 +89,7 @@ BAD_CONFIG_BYTES = {
     "cfg_plan_unknown": _vertical_with("plan", "descent = 3.0").encode(),
     "cfg_plan_list": VERTICAL_TOML.replace("descent_m = 3.0", "descent_m = [3.0]").encode(),
     "cfg_plan_huge": VERTICAL_TOML.replace("descent_m = 3.0", "descent_m = 1e9").encode(),
-    "cfg_plan_bool": VERTICAL_TOML.replace("accel_fraction = 0.5", "accel_fraction = true").encode(),
+    "cfg_plan_bool": VERTICAL_TOML.replace("accel_fraction = 0.15", "accel_fraction = true").encode(),
     "cfg_height": VERTICAL_TOML.replace("start_height_m = 5.0", "start_height_m = 1e308").encode(),
     "cfg_geofence": VERTICAL_TOML.replace("geofence_radius_m = 10.0", "geofence_radius_m = inf").encode(),
     "cfg_debounce": VERTICAL_TOML.replace("debounce_samples = 3", "debounce_samples = 1000000000").encode(),

@@ -18,6 +18,7 @@ from flighttest.aero import G_MPS2
 from flighttest.profiles import load_profile
 from sitl_fakes.control import NAN, Target
 from sitl_fakes.disturbance import Disturbance, VrsTruth, default_onset_mps
+from sitl_fakes.estimator import EstimateError
 from sitl_fakes.launcher import FakeVehicle, wait_for
 from sitl_fakes.link import Link
 from sitl_fakes.px4 import Mode
@@ -126,6 +127,9 @@ def test_exits_when_its_parent_dies(tmp_path):
 
 
 def make_vehicle(vehicle="x500", onset=None, severity=1.0, seed=1, **cfg):
+    """The fake in fast time; its estimate is the truth unless ``estimate_error`` is given (these tests
+    judge the controller's tracking, which a PX4-like estimate error would hide)."""
+    cfg.setdefault("estimate_error", EstimateError().scaled(0.0))
     profile = load_profile(vehicle)
     onset = default_onset_mps(profile.v_h_mps) if onset is None else onset
     config = FakeConfig(profile=profile, truth=VrsTruth(onset, 20.0, severity, seed, profile.v_h_mps), **cfg)

@@ -23,7 +23,9 @@ pytestmark = pytest.mark.flight
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 LOG_FILES = ("meta.json", "flight.tlog", "setpoints.csv", "guard.csv", "events.jsonl", "preflight.json",
              "trajectory.csv", "trajectory.json", "summary.json")  # fmt: skip
-TOLERANCE_MPS = 0.1
+# the onset read from the log is known to about the estimate's descent-rate error (PX4-like: 0.12 m/s)
+TOLERANCE_MPS = 0.15
+DETECTABLE_DEPTH_N = 0.03
 
 
 def _set(text: str, key: str, value: str) -> str:
@@ -71,13 +73,15 @@ def test_probe_finds_the_truth_onset(fake_vehicle_factory, tmp_path, truth_onset
 
     # the probe stopped on the fluctuation detector, recovered and landed; the log folder is complete
     assert summary["outcome"] == "probe_stopped", summary
-    assert summary["abort_verdict"] == "fluctuation" and "angular-rate" in summary["abort_reason"]
+    assert summary["abort_verdict"] == "fluctuation"
+    assert "angular-rate" in summary["abort_reason"] or "vertical-acceleration" in summary["abort_reason"]
     assert summary["phase_at_end"] == "stream" and summary["final_armed"] is False
     assert [r["rung"] for r in summary["ladder"]][:3] == ["RECOVER", "HOLD", "LAND"]
     assert all((folder / f).stat().st_size > 0 for f in LOG_FILES)
     events = [json.loads(line) for line in (folder / "events.jsonl").read_text().splitlines()]
     base = next(e for e in events if e["event"] == "fluct_baseline")  # measured in the settle, before streaming
-    assert base["rate_std_dps"] is not None and base["rate_std_dps"] < 0.5
+    # a PX4-like hover is not still: PX4 SITL hovers with 4.8 °/s of rate std (../shared/px4_sih)
+    assert base["rate_std_dps"] is not None and base["rate_std_dps"] < 6.0
     abort = next(e for e in events if e["event"] == "abort")
     assert abort["phase"] == "stream"
     meta = json.loads((folder / "trajectory.json").read_text())
@@ -88,11 +92,14 @@ def test_probe_finds_the_truth_onset(fake_vehicle_factory, tmp_path, truth_onset
     truth = pd.read_csv(fake.truth_log, low_memory=False)
     assert not (truth["kind"] == "crash").any()
     state = truth[truth["kind"] == "state"]
+    # … within a second of the disturbance becoming one to detect: 3 % of thrust (depth 0.03). A
+    # shallower graze may go unseen: a PX4-like vehicle's own motion in the sweep (its cascade, its
+    # estimate's error) shows 0.4-1.4 °/s of rate fluctuation without any VRS
     inside = state[state["depth_n"] > 0]
-    assert len(inside) > 0
-    t_in = float(inside["unix_s"].iloc[0])
-    assert t_in < abort["unix_s"] < t_in + 1.0
-    assert state["depth_n"].max() < 0.08 and state["thrust_loss"].max() < 0.07
+    assert len(inside) > 0 and float(inside["unix_s"].iloc[0]) < abort["unix_s"]
+    deep = state[state["depth_n"] > DETECTABLE_DEPTH_N]
+    assert deep.empty or abort["unix_s"] < float(deep["unix_s"].iloc[0]) + 1.0
+    assert state["depth_n"].max() < 0.12 and state["thrust_loss"].max() < 0.1
     assert state["w_mps"].max() < truth_onset + 0.5
 
     # identification recovers the truth within the stated tolerance and its own uncertainty
@@ -125,6 +132,6 @@ def test_probe_finds_the_truth_onset(fake_vehicle_factory, tmp_path, truth_onset
     assert loud[0]["fluct_index_max"] > 3.0, descents
     assert loud[0]["rate_rms_max_radps"] > 0.01
     # the earlier sweeps slower than the onset are quiet (the landing after the abort still shakes:
-    # it is not one of them)
+    # it is not one of them) — quiet as a PX4-like vehicle is: about 1 °/s of its own motion
     quiet = [d for d in descents if d["max_rate_mps"] < truth_onset and d["start_s"] < loud[0]["start_s"]]
-    assert all(d["fluct_index_max"] < 1.0 and d["rate_rms_max_radps"] < 0.005 for d in quiet), descents
+    assert all(d["fluct_index_max"] < 1.0 and d["rate_rms_max_radps"] < 0.03 for d in quiet), descents

@@ -1,0 +1,76 @@
+"""The acceleration feed-forward an autopilot needs to fly a plan as planned.
+
+A plan gives position, velocity and the *net* acceleration of the vehicle. PX4's position controller
+(``PositionControl``, the firmware of ``../shared/px4_sih``; reproduced in ``sitl_fakes.control``)
+does apply the acceleration flighttest sends as feed-forward, but turns it into a thrust vector its
+own way, and its attitude follows that vector late. Measured on PX4 SITL and on the fake calibrated
+against it (``bench/RESULTS.md``, "Flying the plan PX4 flies"), three corrections make the vehicle fly
+the plan's thrust vector when the plan needs it:
+
+1. **Lead** (``lead_s``): PX4 has no tilt feed-forward; its tilt trails a new thrust direction by
+   ``1/MC_ROLL_P`` (0.25 s on SIH) plus the rate loop and motors. The *horizontal* acceleration sent
+   at ``t`` is the plan's at ``t + lead_s``, so the tilt arrives when the plan needs it. Not the
+   vertical one: collective thrust follows within the motors' 50 ms, and a led plunge made PX4 SITL
+   sink 0.2 m/s faster than planned while its tilt still lagged. Position and velocity are not led
+   (the position loop would pull ahead).
+2. **Drag** (``drag_per_s``): PX4 assumes thrust and gravity are all that act; a vehicle with linear
+   drag (SIH: ``SIH_KDV`` N per m/s) needs ``drag/m · v_air`` more. Without it the velocity loop
+   makes up the loss late, at the helix's speeds by tenths of a m/s.
+3. **Decoupling** (``decoupled``, PX4's ``MPC_ACC_DECOUPLE`` = 1, its default): PX4 tilts for the
+   horizontal acceleration *against gravity alone* and sets the vertical thrust separately, so in a
+   plunge (vertical acceleration ``a_d`` > 0) it tilts less than the plan — by ``(g − a_d)/g`` in
+   tan(tilt). Scaling the horizontal feed-forward by ``g/(g − a_d)`` makes PX4's tilt the plan's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from flighttest.aero import G_MPS2
+from flighttest.trajectory import Trajectory
+
+# the fraction of g below which the vertical thrust would vanish: no tilt can be matched there
+MIN_SPECIFIC_THRUST_MPS2 = 0.1 * G_MPS2
+
+
+@dataclass(frozen=True)
+class Feedforward:
+    lead_s: float = 0.2
+    drag_per_s: float = 0.0  # linear drag / mass
+    decoupled: bool = True
+
+    def describe(self) -> dict[str, float | bool]:
+        return {"lead_s": self.lead_s, "drag_per_s": self.drag_per_s, "decoupled": self.decoupled}
+
+
+def feedforward_accel_ned(
+    t_s: np.ndarray, vel_ned: np.ndarray, acc_ned: np.ndarray, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)
+) -> np.ndarray:
+    """The acceleration to send at each row (n, 3) for a plan's velocity and net acceleration."""
+    t = np.asarray(t_s, float)
+    acc = np.asarray(acc_ned, float)
+    if ff.lead_s > 0 and t.size > 1:
+        led = t + ff.lead_s
+        acc = np.stack([np.interp(led, t, acc[:, 0], right=0.0), np.interp(led, t, acc[:, 1], right=0.0),
+                        acc[:, 2]], axis=1)  # fmt: skip
+    acc = acc + ff.drag_per_s * (np.asarray(vel_ned, float) - np.asarray(wind_ned, float))
+    if ff.decoupled:
+        scale = G_MPS2 / np.maximum(G_MPS2 - acc[:, 2], MIN_SPECIFIC_THRUST_MPS2)
+        acc = acc * np.stack([scale, scale, np.ones_like(scale)], axis=1)
+    return acc
+
+
+def for_autopilot(traj: Trajectory, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)) -> Trajectory:
+    """``traj`` with its acceleration columns replaced by what the autopilot should be sent."""
+    df = traj.df.copy()
+    acc = feedforward_accel_ned(
+        df["t_s"].to_numpy(float),
+        df[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(float),
+        df[["an_mps2", "ae_mps2", "ad_mps2"]].to_numpy(float),
+        ff,
+        wind_ned,
+    )
+    df["an_mps2"], df["ae_mps2"], df["ad_mps2"] = acc[:, 0], acc[:, 1], acc[:, 2]
+    return Trajectory(df, dict(traj.meta))

@@ -1,0 +1,48 @@
+"""The feed-forward flighttest sends PX4 (flighttest.feedforward), pure, and what PX4's cascade makes of it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from flighttest.aero import G_MPS2
+from flighttest.feedforward import Feedforward, feedforward_accel_ned
+from flighttest.profiles import load_profile
+from sitl_fakes.control import Controller, Limits, Target
+from sitl_fakes.physics import RigidBodyState
+
+T = np.arange(0.0, 2.0, 0.02)
+
+
+def test_lead_sends_the_acceleration_due_later():
+    acc = np.zeros((T.size, 3))
+    acc[T >= 1.0, 0] = 2.0  # a step at 1 s
+    out = feedforward_accel_ned(T, np.zeros_like(acc), acc, Feedforward(lead_s=0.2, decoupled=False))
+    assert out[np.isclose(T, 0.78), 0] == 0.0 and out[np.isclose(T, 0.8), 0] == pytest.approx(2.0)
+    assert out[-1, 0] == 0.0  # past the plan's end the plan is at rest
+
+
+def test_drag_is_added_along_the_air_relative_velocity():
+    vel = np.tile([2.0, -1.0, 0.5], (T.size, 1))
+    ff = Feedforward(lead_s=0.0, drag_per_s=0.5, decoupled=False)
+    out = feedforward_accel_ned(T, vel, np.zeros_like(vel), ff, wind_ned=(1.0, 0.0, 0.0))
+    assert out[0] == pytest.approx([0.5 * 1.0, -0.5, 0.25])
+
+
+@pytest.mark.parametrize("a_down", [-3.0, 0.0, 4.0])
+def test_decoupling_makes_px4s_tilt_the_plans(a_down):
+    # the plan tilts for (a_n, g − a_d); PX4 with MPC_ACC_DECOUPLE for (a_n', g): scaled, they agree,
+    # and PX4's vertical thrust (from a_d alone) gives the plan's collective
+    plan = np.array([[2.0, 0.0, a_down]])
+    sent = feedforward_accel_ned(np.array([0.0]), np.zeros((1, 3)), plan, Feedforward(lead_s=0.0))
+    plan_tilt = math.atan2(2.0, G_MPS2 - a_down)
+    prof = load_profile("sih_quadx")
+    hover = prof.mass_kg * G_MPS2 / (4 * prof.max_thrust_per_rotor_n)
+    ctrl = Controller(prof)
+    target = Target(acc=[float(x) for x in sent[0]])
+    bz, collective = ctrl.thrust_setpoint(0.004, RigidBodyState(), target, Limits(thr_hover=hover))
+    assert math.acos(bz[2]) == pytest.approx(plan_tilt, abs=1e-6)
+    thrust_n = collective * 4 * prof.max_thrust_per_rotor_n
+    assert thrust_n == pytest.approx(prof.mass_kg * math.hypot(2.0, G_MPS2 - a_down), rel=1e-6)
