@@ -39,6 +39,7 @@ PILOT_MODES = gd.PILOT_MODES
 CLIMB_RATE_MPS = 1.0
 # settled: within this of the hover point, this slow (PX4's estimate wanders 0.3-0.8 m and its velocity
 # is off by 0.1-0.2 m/s: ../shared/px4_sih; tighter and a real vehicle never settles)
+HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag before it judges them
 START_TOL_M = 0.6
 SETTLE_SPEED_MPS = 0.25
 LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
@@ -92,6 +93,10 @@ class FlightOutcome:
 
 class _Refused(Exception):
     pass
+
+
+def _healthy(st) -> bool:
+    return bool(st.health) and all(st.health.values())
 
 
 class MissionRunner:
@@ -513,6 +518,19 @@ class MissionRunner:
         self.set_phase("preflight")
         link, req = self.link, self.req
         await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
+        if not link.state.armed and link.state.flight_mode == "OFFBOARD":
+            # PX4 stays in Offboard after an offboard flight lands, and Offboard without a setpoint
+            # stream is not armable (the campaign's next flight on the same vehicle): Hold is
+            self.event("mode_reset", old="OFFBOARD", new="HOLD", why="disarmed in Offboard is not armable")
+            with contextlib.suppress(Exception):
+                await link.call(link.action.hold(), "hold", 5.0)
+        if not _healthy(link.state):
+            # a vehicle that has just landed (the campaign's next flight) or booted is not armable
+            # for some seconds (PX4 SITL: more than 10 s after a landing); wait before judging it
+            self.event("waiting_for_health", not_ok=sorted(k for k, v in link.state.health.items() if not v),
+                       timeout_s=HEALTH_WAIT_S)  # fmt: skip
+            if await link.wait_for(_healthy, HEALTH_WAIT_S):
+                self.event("healthy")
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
         params = {}
         from flighttest.preflight import ABORT_PARAMS

@@ -47,6 +47,7 @@ class Response:
     quat: np.ndarray  # (n, 4) w, x, y, z body → NED
     motors: np.ndarray  # (n, 4) commands 0..1
     est_vel_ned: np.ndarray  # (n, 3) the estimate's velocity (= vel_ned without an estimate error)
+    est_pos_ned: np.ndarray  # (n, 3) the estimate's position
 
     @property
     def tilt_deg(self) -> np.ndarray:
@@ -94,6 +95,7 @@ def replay(
     out_q = np.empty((n, 4))
     out_u = np.empty((n, 4))
     out_ev = np.empty((n, 3))
+    out_ep = np.empty((n, 3))
     estimator = Estimator(estimate_error, seed) if estimate_error is not None else None
     k = -1
     no_wind = (0.0, 0.0, 0.0)
@@ -120,6 +122,7 @@ def replay(
         thrusts = ctrl.rotor_thrusts(dt_s, s, bz, collective, yaw, lim)
         body.step(dt_s, thrusts, ones, no_wind)
         out_ev[i] = (s.vn_mps, s.ve_mps, s.vd_mps)
+        out_ep[i] = (s.n_m, s.e_m, s.d_m)
         s = body.state
         out_t[i] = t + dt_s
         out_p[i] = (s.n_m, s.e_m, s.d_m)
@@ -127,8 +130,8 @@ def replay(
         out_q[i] = (s.qw, s.qx, s.qy, s.qz)
         out_u[i] = ctrl.last_u
     if estimator is None:
-        out_ev = out_v.copy()
-    return Response(out_t, out_p, out_v, out_q, out_u, out_ev)
+        out_ev, out_ep = out_v.copy(), out_p.copy()
+    return Response(out_t, out_p, out_v, out_q, out_u, out_ev, out_ep)
 
 
 __all__ = ["NAN", "Response", "SetpointStream", "px4_params", "replay"]

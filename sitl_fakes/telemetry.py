@@ -199,8 +199,8 @@ class Telemetry:
         health = SENSORS
         if v.position_valid():
             health |= GPS
-            if not v.crashed:
-                health |= PREARM
+        if v.armable():
+            health |= PREARM
         return M.MAVLink_sys_status_message(present, present, health, 250, 16200, 500, 90, 0, 0, 0, 0, 0, 0)
 
     def extended_sys_state(self):

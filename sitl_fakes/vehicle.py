@@ -82,6 +82,7 @@ class FakePx4:
         self.params["MPC_THR_HOVER"].value = prof.mass_kg * G_MPS2 / (prof.n_rotors * prof.max_thrust_per_rotor_n)
         self.param_names = sorted(self.params)
         self.mode = Mode.HOLD
+        self.user_mode = Mode.HOLD  # the mode last asked for (DO_SET_MODE): PX4 returns to it after a landing
         self.armed = False
         self.crashed = False
         self.crash_reason = ""
@@ -109,6 +110,12 @@ class FakePx4:
 
     def position_valid(self) -> bool:
         return self.t_s >= self.cfg.gps_delay_s
+
+    def armable(self) -> bool:
+        """PX4's prearm check as far as the fake models it: a position, no crash, and not Offboard
+        without a live setpoint stream."""
+        offboard_dead = self.mode is Mode.OFFBOARD and self.now_wall() - self.last_sp_time > OFFBOARD_SIGNAL_FRESH_S
+        return self.position_valid() and not self.crashed and not offboard_dead
 
     def landed(self) -> bool:
         return self.body.state.on_ground
@@ -208,7 +215,7 @@ class FakePx4:
     def _supervise(self) -> None:
         """Failsafes and automatic transitions: offboard loss, takeoff done, auto-disarm."""
         s = self.est
-        if self.mode is Mode.OFFBOARD and self.now - self.last_sp_time > self.p("COM_OF_LOSS_T"):
+        if self.armed and self.mode is Mode.OFFBOARD and self.now - self.last_sp_time > self.p("COM_OF_LOSS_T"):
             self._offboard_lost()
         if self.mode is Mode.TAKEOFF and -s.d_m >= self.takeoff_alt_m - TAKEOFF_ACCEPT_M:
             self.set_mode(Mode.HOLD, "takeoff complete")
@@ -220,6 +227,10 @@ class FakePx4:
                 self.disarm("no takeoff within COM_DISARM_PRFLT")
             elif self.has_flown and self.now - self.ground_since > self.p("COM_DISARM_LAND") > 0:
                 self.disarm("landed")
+                if self.user_mode is Mode.OFFBOARD:
+                    # PX4 goes back to the mode asked for: Offboard, which without a setpoint stream is
+                    # not armable (../shared/px4_sih: "reports the last mode (OFFBOARD) on the ground")
+                    self.set_mode(Mode.OFFBOARD, "landed: back to the mode last asked for")
 
     def _offboard_lost(self) -> None:
         action = int(self.p("COM_OBL_RC_ACT"))
@@ -439,6 +450,7 @@ class FakePx4:
             return ACCEPTED, ""
         if mode is Mode.LAND and not self.armed:
             return TEMP_REJECTED, "not armed"
+        self.user_mode = mode
         self.set_mode(mode, "DO_SET_MODE")
         return ACCEPTED, ""
 

@@ -279,7 +279,27 @@ def test_helix_mission_lands_at_the_planned_point_faster_than_the_vertical_basel
     vertical = plan_vertical(prof, height_m=5.0, margin_mps=prof.vrs.margin_mps + vcfg["extra_margin_mps"],
                              accel_fraction=vcfg["accel_fraction"])  # fmt: skip
     assert s["descent_time_s"] < 0.75 * vertical.t_f_s
-    assert s["descent_time_s"] < meta["t_f_s"] + 1.0
+    # … and about as planned: PX4 SITL flew this helix in 0.95-1.43 × its planned time (bench/RESULTS.md)
+    assert s["descent_time_s"] < 1.5 * meta["t_f_s"]
+
+
+def test_helix_flies_on_the_sih_quadx_fake_as_on_px4_sitl(fake_vehicle_factory, tmp_path):
+    # the issue-11 configuration PX4 SITL flies (sih_quadx, 7 m start, 5 m down): the fake's PX4 cascade
+    # flies it too, the guard silent, the descent close to the plan
+    fake = fake_vehicle_factory("sih_quadx")
+    rc, s, err = run_fly("helix", fake.url, tmp_path, "--vehicle", "sih_quadx", "--height", "7", "--descent", "5",
+                         "--config", str(ci_config(tmp_path, "helix")))  # fmt: skip
+    assert rc == 0, err
+    assert s["outcome"] == "completed" and s["abort_reason"] is None
+    g = pd.read_csv(Path(s["log_dir"]) / "guard.csv")
+    t0, t1 = stream_window(s["log_dir"])
+    assert_guard_silent(g, g[(g.t_s >= t0) & (g.t_s <= t1)])
+    meta = json.loads((Path(s["log_dir"]) / "trajectory.json").read_text())
+    assert meta["vehicle"] == "sih_quadx" and meta["problem"]["height_m"] == 5.0
+    assert s["descent_time_s"] < 1.5 * meta["t_f_s"]
+    events_ = events(s["log_dir"])
+    ff = next(e for e in events_ if e["event"] == "feedforward")
+    assert ff["decoupled"] is True and ff["lead_s"] == 0.2 and ff["drag_per_s"] == pytest.approx(1.0)
 
 
 # -- the guard ---------------------------------------------------------------------------------------

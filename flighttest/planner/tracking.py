@@ -29,7 +29,7 @@ from flighttest.profiles import VehicleProfile
 class TrackingMargin:
     """How far inside the guard's bound and the vehicle's hard limits a flown plan stays."""
 
-    guard_margin_mps: float = 0.35  # plan this far inside the guard's bound (on top of its own margin)
+    guard_margin_mps: float = 0.4  # plan this far inside the guard's bound (on top of its own margin)
     tilt_margin_deg: float = 10.0  # plan tilt ≤ vehicle max tilt − this
     rate_fraction: float = 0.35  # plan body rates ≤ this × the vehicle's max rates (PX4 trails faster turns)
     thrust_max_fraction: float = 0.75  # collective ≤ this × the rotors' maximum
