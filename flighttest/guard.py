@@ -1,9 +1,9 @@
 """The live VRS guard and its abort ladder: pure decision logic, no I/O, testable without a vehicle.
 
-``Guard.on_sample`` judges one telemetry sample (NED velocity, attitude, wind, altitude, the
-streamer's commanded acceleration) and returns a ``Decision`` carrying every input it used, so the
-flight log can replay why it acted. ``Guard.on_tick`` catches stale telemetry between samples, by
-the phase of the flight (see "Stale telemetry" below).
+``Guard.on_sample`` judges one telemetry sample (NED velocity, attitude, wind, altitude; the
+streamer's commanded acceleration is logged beside it, not judged) and returns a ``Decision`` carrying
+every input it used, so the flight log can replay why it acted. ``Guard.on_tick`` catches stale
+telemetry between samples, by the phase of the flight (see "Stale telemetry" below).
 ``AbortLadder`` turns a trigger into the sequence recovery setpoint → Hold → Land and tells the
 runner which command to send next; the runner only executes.
 
@@ -77,7 +77,7 @@ class GuardLimits:
     stale_after_s: float = STALE_AFTER_S  # offboard: no state sample this long aborts
     stale_periods: float | None = None  # the older spelling: when given, stale_after_s = this × the period
     autopilot_stale_s: float = AUTOPILOT_STALE_S  # PX4 flying itself: a gap this long acts
-    horizon_s: float = 0.2
+    horizon_s: float = 0.1  # the prediction's reach along the measured trend (missions' [guard] horizon_s)
     trend_window_s: float = 0.1  # the predictor's slope is taken over this much of the latest samples
     debounce_samples: int = 3
     clear_violation_mps: float = 0.05
@@ -335,7 +335,6 @@ class Guard:
         w, u, margin = float(w), float(u), float(margin)
         wp, up = self._extrapolate(s.t_s, w, u)
         pmargin = float(lim.region.margin(wp, up))
-        w, u, margin = float(w), float(u), float(margin)
 
         def dec(verdict: str, action: str, reason: str) -> Decision:
             return Decision(s.t_s, verdict, action, reason, w, u, margin, pmargin, s)

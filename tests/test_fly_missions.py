@@ -296,7 +296,6 @@ def test_helix_flies_on_the_sih_quadx_fake_as_on_px4_sitl(fake_vehicle_factory, 
     assert_guard_silent(g, g[(g.t_s >= t0) & (g.t_s <= t1)])
     meta = json.loads((Path(s["log_dir"]) / "trajectory.json").read_text())
     assert meta["vehicle"] == "sih_quadx" and meta["problem"]["height_m"] == 5.0
-    assert s["descent_time_s"] < 1.5 * meta["t_f_s"]
     events_ = events(s["log_dir"])
     ff = next(e for e in events_ if e["event"] == "feedforward")
     assert ff["decoupled"] is True and ff["lead_s"] == 0.2 and ff["drag_per_s"] == pytest.approx(1.0)
