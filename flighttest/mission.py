@@ -37,9 +37,9 @@ from flighttest.trajectory import Trajectory
 
 PILOT_MODES = gd.PILOT_MODES
 CLIMB_RATE_MPS = 1.0
+HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag before it judges them
 # settled: within this of the hover point, this slow (PX4's estimate wanders 0.3-0.8 m and its velocity
 # is off by 0.1-0.2 m/s: ../shared/px4_sih; tighter and a real vehicle never settles)
-HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag before it judges them
 START_TOL_M = 0.6
 SETTLE_SPEED_MPS = 0.25
 LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
@@ -520,7 +520,7 @@ class MissionRunner:
         await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
         if not link.state.armed and link.state.flight_mode == "OFFBOARD":
             # PX4 stays in Offboard after an offboard flight lands, and Offboard without a setpoint
-            # stream is not armable (the campaign's next flight on the same vehicle): Hold is
+            # stream is not armable (the campaign's next flight on the same vehicle): Hold is armable
             self.event("mode_reset", old="OFFBOARD", new="HOLD", why="disarmed in Offboard is not armable")
             with contextlib.suppress(Exception):
                 await link.call(link.action.hold(), "hold", 5.0)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flighttest.aero import G_MPS2
 from flighttest.profiles import VehicleProfile
 from sitl_fakes import px4
 from sitl_fakes.control import NAN, Controller, Limits, Target
@@ -62,7 +63,7 @@ def px4_params(overrides: Mapping[str, float] | None = None, profile: VehiclePro
     """The fake's PX4 parameter values (defaults, the vehicle's hover thrust, then ``overrides``)."""
     values = {name: float(p.value) for name, p in px4.default_params().items()}
     if profile is not None:
-        values["MPC_THR_HOVER"] = profile.mass_kg * 9.80665 / (profile.n_rotors * profile.max_thrust_per_rotor_n)
+        values["MPC_THR_HOVER"] = profile.mass_kg * G_MPS2 / (profile.n_rotors * profile.max_thrust_per_rotor_n)
     values.update(overrides or {})
     return values
 
