@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 
 from flighttest import guard as gd  # noqa: E402
 from flighttest.analysis.descent_time import DescentTimer  # noqa: E402
-from flighttest.feedforward import Feedforward, for_autopilot  # noqa: E402
+from flighttest.feedforward import CatchUpLimit, Feedforward, for_autopilot  # noqa: E402
 from flighttest.mission_scripts import MISSIONS_DIR  # noqa: E402
 from flighttest.missions_config import FlightConfig, load_mission_config  # noqa: E402
 from flighttest.planner.export import helix_trajectory  # noqa: E402
@@ -38,7 +38,7 @@ from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
 from flighttest.profiles import load_profile  # noqa: E402
 from sitl_fakes.estimator import EstimateError  # noqa: E402
 from sitl_fakes.physics import RigidBodyState  # noqa: E402
-from sitl_fakes.replay import SetpointStream, replay  # noqa: E402
+from sitl_fakes.replay import SetpointStream, px4_params, replay  # noqa: E402
 
 
 def folder_row(folder: Path) -> dict:
@@ -76,7 +76,11 @@ def fake_rows(vehicle: str, seeds: int) -> list[dict]:
     )  # fmt: skip
     plan_s = time.perf_counter() - t0
     ff = Feedforward(FlightConfig().feedforward_lead_s, prof.drag_n_per_mps / prof.mass_kg)
+    # as the mission streams it (flighttest.streamer): down setpoints within the catch-up limit
+    fl = cfg.flight
+    catch_up = CatchUpLimit(fl.catch_up_excess_mps, fl.catch_up_floor_mps, px4_params()["MPC_Z_P"])
     sent = for_autopilot(plan, ff).resample(50.0).df
+    vd_plan = np.concatenate([[0.0], sent.vd_mps.to_numpy()])
     t = np.concatenate([[0.0], sent.t_s.to_numpy() + 1.0])
     off = np.array([0.0, 0.0, -7.0])
     stream = SetpointStream(
@@ -89,8 +93,9 @@ def fake_rows(vehicle: str, seeds: int) -> list[dict]:
     end_ned = np.array([sent.n_m.iloc[-1], sent.e_m.iloc[-1], sent.d_m.iloc[-1]]) + off
     rows = []
     for seed in range(seeds):
-        r = replay(prof, stream, RigidBodyState(d_m=-7.0, on_ground=False), t[-1] + 1.0,
-                   estimate_error=EstimateError(), seed=seed)  # fmt: skip
+        r = replay(prof, stream, RigidBodyState(d_m=-7.0, on_ground=False), t[-1] + 3.0,
+                   estimate_error=EstimateError(), seed=seed,
+                   catch_up_down=lambda k, d, d_est: catch_up.limit(d, d_est, vd_plan[k]))  # fmt: skip
         guard = gd.Guard(gd.GuardLimits(region=prof.guard_region(), horizon_s=cfg.guard.horizon_s,
                                         debounce_samples=cfg.guard.debounce_samples,
                                         clear_violation_mps=cfg.guard.clear_violation_mps))  # fmt: skip

@@ -20,10 +20,13 @@ the plan's thrust vector when the plan needs it:
    horizontal acceleration *against gravity alone* and sets the vertical thrust separately, so in a
    plunge (vertical acceleration ``a_d`` > 0) it tilts less than the plan — by ``(g − a_d)/g`` in
    tan(tilt). Scaling the horizontal feed-forward by ``g/(g − a_d)`` makes PX4's tilt the plan's.
+
+And one bound on the position setpoint while streaming: the catch-up limit (``limit_catch_up_down``).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,3 +77,47 @@ def for_autopilot(traj: Trajectory, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)) -
     )
     df["an_mps2"], df["ae_mps2"], df["ad_mps2"] = acc[:, 0], acc[:, 1], acc[:, 2]
     return Trajectory(df, dict(traj.meta))
+
+
+# the autopilot's vertical position gain (velocity per metre of position error), by autopilot
+Z_POSITION_GAIN_PARAMS = {"PX4": "MPC_Z_P", "ArduPilot": "PSC_POSZ_P"}
+DEFAULT_Z_POSITION_GAIN_PER_S = 1.0  # both autopilots' default
+
+
+def z_position_gain_per_s(params: dict | None, autopilot: str | None) -> float:
+    """The vertical position gain the autopilot uses, from its parameters (else both defaults' 1/s)."""
+    name = Z_POSITION_GAIN_PARAMS.get(autopilot or "", "MPC_Z_P")
+    try:
+        gain = float((params or {})[name])
+    except (KeyError, TypeError, ValueError):
+        return DEFAULT_Z_POSITION_GAIN_PER_S
+    return gain if math.isfinite(gain) and gain > 0 else DEFAULT_Z_POSITION_GAIN_PER_S
+
+
+@dataclass(frozen=True)
+class CatchUpLimit:
+    """How far below the vehicle a down position setpoint may be sent (PX4 and ArduPilot both add
+    their vertical position gain × the position error to the plan's descent rate).
+
+    On PX4 SITL the EKF's vertical velocity runs 0.1–0.4 m/s ahead of the truth for seconds while its
+    height follows the GNSS height, so the estimate falls 0.35 m behind a slow descent and PX4
+    descends 0.35 m/s faster than planned — by its own estimate, which the guard judges: every
+    vertical baseline it aborted there did so (bench/RESULTS.md). So the commanded descent rate,
+    plan plus catch-up, stays within ``max(plan + excess_mps, floor_mps)``: a little over the plan
+    where it descends fast, and up to ``floor_mps`` (a rate far inside the cone at rest) where it
+    holds or barely descends, so an end hold is still reached promptly. Climbing back to the plan is
+    never limited.
+    """
+
+    excess_mps: float = 0.1
+    floor_mps: float = 0.3
+    gain_per_s: float = DEFAULT_Z_POSITION_GAIN_PER_S
+
+    def limit(self, d_setpoint_m: float, d_estimate_m: float, vd_plan_mps: float) -> float:
+        """The down position setpoint (NED, m) to send for the plan's ``d_setpoint_m``."""
+        below_m = max(self.excess_mps, self.floor_mps - vd_plan_mps) / self.gain_per_s
+        return min(d_setpoint_m, d_estimate_m + below_m)
+
+    def describe(self) -> dict[str, float]:
+        return {"catch_up_excess_mps": self.excess_mps, "catch_up_floor_mps": self.floor_mps,
+                "z_position_gain_per_s": self.gain_per_s}  # fmt: skip

@@ -24,7 +24,7 @@ from typing import Any
 from flighttest import guard as gd
 from flighttest.analysis import descent_time as dtime
 from flighttest.errors import FlighttestError
-from flighttest.feedforward import Feedforward, for_autopilot
+from flighttest.feedforward import CatchUpLimit, Feedforward, for_autopilot, z_position_gain_per_s
 from flighttest.flightlog import FlightLog
 from flighttest.inputs import MAX_DURATION_S
 from flighttest.link import VehicleLink
@@ -32,6 +32,7 @@ from flighttest.missions_config import MissionConfig
 from flighttest.pauses import FlightCollector
 from flighttest.preflight import PreflightResult, param_checks, trajectory_checks, trajectory_stats, vehicle_checks
 from flighttest.profiles import VehicleProfile
+from flighttest.settling import SettleCheck
 from flighttest.streamer import Setpoint, SetpointStreamer
 from flighttest.trajectory import Trajectory
 
@@ -42,6 +43,7 @@ HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag befor
 # is off by 0.1-0.2 m/s: ../shared/px4_sih; tighter and a real vehicle never settles)
 START_TOL_M = 0.6
 SETTLE_SPEED_MPS = 0.25
+SETTLE_WINDOW_S = 1.0  # … or its position moved that slowly over this window (flighttest.settling)
 LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
 # a trajectory longer than this outlasts the battery (flighttest.inputs): a damaged file, not a flight,
 # and resampling it at the setpoint rate could need more memory than there is
@@ -182,14 +184,19 @@ class MissionRunner:
     # -- telemetry listeners -------------------------------------------------------------------------
     def _feedforward(self, params: dict[str, Any] | None, autopilot: str | None) -> Feedforward:
         """The feed-forward corrections for this vehicle and autopilot (``flighttest.feedforward``):
-        PX4 decouples the tilt from the vertical acceleration unless ``MPC_ACC_DECOUPLE`` is 0."""
+        PX4 decouples the tilt from the vertical acceleration unless ``MPC_ACC_DECOUPLE`` is 0. Also
+        gives the streamer its catch-up limit, through the autopilot's vertical position gain."""
         decoupled = autopilot == "PX4"
         if params and "MPC_ACC_DECOUPLE" in params:
             with contextlib.suppress(TypeError, ValueError):
                 decoupled = int(float(params["MPC_ACC_DECOUPLE"])) != 0
         prof = self.req.profile
         ff = Feedforward(self.fl.feedforward_lead_s, prof.drag_n_per_mps / prof.mass_kg, decoupled)
-        self.event("feedforward", **ff.describe())
+        catch_up = CatchUpLimit(self.fl.catch_up_excess_mps, self.fl.catch_up_floor_mps,
+                                z_position_gain_per_s(params, autopilot))  # fmt: skip
+        if self.streamer is not None:
+            self.streamer.catch_up = catch_up
+        self.event("feedforward", **ff.describe(), **catch_up.describe())
         return ff
 
     def _wind(self) -> tuple[float, float, float]:
@@ -638,9 +645,13 @@ class MissionRunner:
         self.event("stream_end", result=res, jitter=self.streamer.jitter())
         if self.ladder.active:
             return None
-        end_sp = self.streamer.last.hold() if self.streamer.last else hold
+        end_sp = self.streamer.last_planned.hold() if self.streamer.last_planned else hold
         self.set_phase("settle")
-        await self._settle(end_sp, fl.settle_s, fl.settle_s * 3 + 10.0, must_settle=False)
+        # hover on until the descent counts as reached too (its rule is stricter than settling: an
+        # overshoot of the end height settles before it is back within 0.2 m), or the settle times out
+        timer = self.descent_timer
+        await self._settle(end_sp, fl.settle_s, fl.settle_s * 3 + 10.0, must_settle=False,
+                           also=lambda: timer is None or timer.result is not None)  # fmt: skip
         if self.ladder.active:
             return None
         self.floor_active = False
@@ -661,23 +672,22 @@ class MissionRunner:
         return self._outcome("completed", None)
 
     async def _settle(self, sp: Setpoint, min_s: float, max_s: float, baseline: bool = False,
-                      must_settle: bool = True) -> None:  # fmt: skip
-        """Hover at ``sp`` until settled; with ``baseline`` the guard's hover fluctuation baseline is
-        the settled part of it (the climb's transient is not the hover). Not settling within ``max_s``
-        is an error only where it must (before the descent)."""
+                      must_settle: bool = True, also: Callable[[], bool] | None = None) -> None:  # fmt: skip
+        """Hover at ``sp`` until settled (and ``also()``); with ``baseline`` the guard's hover
+        fluctuation baseline is the settled part of it (the climb's transient is not the hover). Not
+        settling within ``max_s`` is an error only where it must (before the descent)."""
         self._collect_now()  # PX4 holds the position: a pause of a few ms costs nothing here
         st = self.link.state
         t0 = time.monotonic()
         settled_since = None
+        check = SettleCheck((sp.n_m, sp.e_m, sp.d_m), START_TOL_M, SETTLE_SPEED_MPS, SETTLE_WINDOW_S)
 
         def done() -> bool:
             nonlocal settled_since
             if self.ladder.active:
                 return True
             now = time.monotonic()
-            err = math.dist((st.n_m, st.e_m, st.d_m), (sp.n_m, sp.e_m, sp.d_m))
-            speed = math.sqrt(st.vn_mps**2 + st.ve_mps**2 + st.vd_mps**2)
-            if err <= START_TOL_M and speed <= SETTLE_SPEED_MPS:
+            if check.update(now, (st.n_m, st.e_m, st.d_m), (st.vn_mps, st.ve_mps, st.vd_mps)):
                 if settled_since is None and baseline:
                     self.guard.start_baseline()
                 settled_since = now if settled_since is None else settled_since
@@ -688,7 +698,8 @@ class MissionRunner:
                     self.event("settle_timeout", at_ned=[sp.n_m, sp.e_m, sp.d_m], after_s=max_s)
                     return True
                 raise RuntimeError(f"did not settle at ({sp.n_m:.1f}, {sp.e_m:.1f}, {sp.d_m:.1f}) within {max_s:g} s")
-            return settled_since is not None and now - settled_since >= min(min_s, 1.0) and now - t0 >= min_s
+            return (settled_since is not None and now - settled_since >= min(min_s, 1.0) and now - t0 >= min_s
+                    and (also is None or also()))
 
         await self.streamer.stream(lambda k: sp, self.phase, done)
 

@@ -62,6 +62,11 @@ class FlightConfig:
     # the acceleration feed-forward is sent this much ahead of the plan (flighttest.feedforward): the
     # autopilot's tilt trails a new thrust direction by about this long
     feedforward_lead_s: float = 0.2
+    # catching up with the plan, the autopilot is never asked to descend faster than
+    # max(plan + catch_up_excess_mps, catch_up_floor_mps) (flighttest.feedforward.CatchUpLimit): an EKF
+    # that trails a descent would otherwise turn its position error into a descent rate the guard aborts on
+    catch_up_excess_mps: float = 0.1
+    catch_up_floor_mps: float = 0.3
 
 
 @dataclass(frozen=True)
@@ -137,6 +142,8 @@ _RANGES: dict[str, Range] = {
     "connect_timeout_s": Range(0.0, MAX_DURATION_S, _S, lo_open=True),
     "min_battery_percent": Range(0.0, 100.0, "%"),
     "feedforward_lead_s": Range(0.0, 1.0, _S),
+    "catch_up_excess_mps": Range(0.0, 5.0, "m/s"),
+    "catch_up_floor_mps": Range(0.0, 5.0, "m/s"),
     # [guard]
     "horizon_s": Range(0.0, 5.0, _S),
     "debounce_samples": Range(1, 100, integer=True),
@@ -190,6 +197,7 @@ _PLAN: dict[str, dict[str, Range | str]] = {
         "thrust_max_fraction": FRACTION,
         "thrust_min_fraction": Range(0.0, 1.0, hi_open=True),
         "descent_max_mps": SPEED_MPS,
+        "thrust_rate_max_mps3": Range(0.0, 1000.0, "m/s³", lo_open=True),
     },
     "file": {},  # a trajectory file is flown as planned
 }

@@ -7,6 +7,8 @@ MAVSDK re-sends the last setpoint at 20 Hz on its own, also when our loop is stu
   locked to the wall clock; every interval between sends is kept to report jitter;
 - whenever it stops — end of trajectory, abort, exception — it leaves a *hold* setpoint (position
   here, zero velocity and acceleration) as the one MAVSDK keeps re-sending;
+- with a ``catch_up`` limit, every position setpoint is sent at most that far below the vehicle
+  (``flighttest.feedforward.CatchUpLimit``); the setpoint log holds what was sent;
 - a watchdog thread leaves that hold setpoint too if the loop stops sending for ``stuck_after_s``
   (an event loop blocked by something else must not keep a descent's feed-forward alive).
 
@@ -23,10 +25,11 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from flighttest.feedforward import CatchUpLimit
 from flighttest.trajectory import Trajectory
 
 
@@ -90,14 +93,19 @@ class SetpointStreamer:
         self.on_send: list[Callable[[float, Setpoint], None]] = []
         # where the vehicle is now (local NED): a stream that stops early holds there
         self.here = here
+        # bounds each position setpoint's downward catch-up (flighttest.feedforward.CatchUpLimit)
+        self.catch_up: CatchUpLimit | None = None
+        self.last_planned: Setpoint | None = None  # the last setpoint before that bound
 
     # -- one setpoint ------------------------------------------------------------------------------
     def send(self, sp: Setpoint, phase: str) -> bool:
         now_pc = time.perf_counter()
         t_mono = time.monotonic()
+        planned, sp = sp, self._limited(sp)
         with self._lock:
             ok = self._send_raw(sp)
             self.last = sp
+            self.last_planned = planned
             self.phase = phase
             if self._last_send_pc is not None and phase == self._interval_phase:
                 self.intervals_s.append(now_pc - self._last_send_pc)
@@ -112,6 +120,16 @@ class SetpointStreamer:
         return ok
 
     _interval_phase = ""
+
+    def _limited(self, sp: Setpoint) -> Setpoint:
+        """``sp`` with its down position kept within the catch-up limit of the vehicle's position."""
+        if self.catch_up is None or self.here is None or sp.velocity_only:
+            return sp
+        d_here = self.here()[2]
+        if not math.isfinite(d_here):
+            return sp
+        d_m = self.catch_up.limit(sp.d_m, d_here, sp.vd_mps)
+        return sp if d_m == sp.d_m else replace(sp, d_m=d_m)
 
     def _send_raw(self, sp: Setpoint) -> bool:
         try:
@@ -177,11 +195,11 @@ class SetpointStreamer:
 
     def leave_safe(self, phase: str, at_vehicle: bool = True) -> Setpoint | None:
         """Make the setpoint MAVSDK keeps re-sending a hold (zero velocity and acceleration); at the
-        vehicle's position if ``at_vehicle`` and known, else at the last setpoint's position."""
-        last = self.last
-        if last is None or last == last.hold():
+        vehicle's position if ``at_vehicle`` and known, else at the last setpoint's planned position."""
+        last, planned = self.last, self.last_planned
+        if last is None or planned is None or last == last.hold():
             return None
-        n, e, d = last.n_m, last.e_m, last.d_m
+        n, e, d = planned.n_m, planned.e_m, planned.d_m  # the hold the plan meant, not the catch-up's
         if at_vehicle and self.here is not None:
             pos = self.here()
             if all(math.isfinite(x) for x in pos):
@@ -207,8 +225,7 @@ class SetpointStreamer:
             if k >= n:
                 return None
             self._k = k
-            r = rows[k]
-            return Setpoint(*(float(x) for x in r))
+            return Setpoint(*(float(x) for x in rows[k]))
 
         try:
             return await self.stream(at, phase, should_stop)

@@ -12,7 +12,7 @@ its telemetry would report).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,8 +77,12 @@ def replay(
     dt_s: float = PHYSICS_DT_S,
     estimate_error: EstimateError | None = None,
     seed: int = 0,
+    catch_up_down: Callable[[int, float, float], float] | None = None,
 ) -> Response:
-    """Fly ``stream`` from ``start`` (airborne, in offboard) for ``duration_s``."""
+    """Fly ``stream`` from ``start`` (airborne, in offboard) for ``duration_s``.
+
+    ``catch_up_down(k, d_setpoint_m, d_estimate_m)``: the down position setpoint actually sent for row
+    ``k`` (flighttest's streamer limits how far below the vehicle it may be)."""
     values = px4_params(params, profile)
     lim = Limits.from_params(values.__getitem__, profile)
     body = QuadBody(profile)
@@ -112,8 +116,11 @@ def replay(
         if k < 0:
             target = Target(pos=[s.n_m, s.e_m, s.d_m], yaw_rad=s.yaw_rad())
         else:
+            pos = [float(x) for x in stream.pos_ned[k]]
+            if catch_up_down is not None:
+                pos[2] = catch_up_down(k, pos[2], s.d_m)
             target = Target(
-                pos=[float(x) for x in stream.pos_ned[k]],
+                pos=pos,
                 vel=[float(x) for x in stream.vel_ned[k]],
                 acc=[float(x) for x in stream.acc_ned[k]],
                 yaw_rad=float(stream.yaw_rad[k]),

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from flighttest.aero import G_MPS2
-from flighttest.feedforward import Feedforward, feedforward_accel_ned
+from flighttest.feedforward import CatchUpLimit, Feedforward, feedforward_accel_ned, z_position_gain_per_s
 from flighttest.profiles import load_profile
 from sitl_fakes.control import Controller, Limits, Target
 from sitl_fakes.physics import RigidBodyState
@@ -46,3 +46,28 @@ def test_decoupling_makes_px4s_tilt_the_plans(a_down):
     assert math.acos(bz[2]) == pytest.approx(plan_tilt, abs=1e-6)
     thrust_n = collective * 4 * prof.max_thrust_per_rotor_n
     assert thrust_n == pytest.approx(prof.mass_kg * math.hypot(2.0, G_MPS2 - a_down), rel=1e-6)
+
+
+def test_catch_up_limit_bounds_the_descent_the_position_error_adds():
+    limit = CatchUpLimit(excess_mps=0.1, floor_mps=0.3, gain_per_s=1.0)
+    # the plan descends at 0.3 m/s, the vehicle is 0.35 m above it: sent 0.1 m below the vehicle, so
+    # PX4 commands 0.3 + 0.1 m/s, not 0.3 + 0.35
+    assert limit.limit(-3.0, -3.35, 0.3) == pytest.approx(-3.25)
+    # within the limit the plan's own setpoint goes out
+    assert limit.limit(-3.3, -3.35, 0.3) == -3.3
+    # below the plan (climbing back to it) nothing is limited
+    assert limit.limit(-3.0, -2.5, 0.3) == -3.0
+    # holding (plan at rest) or climbing, the catch-up may still descend at the floor rate
+    assert limit.limit(-2.0, -3.0, 0.0) == pytest.approx(-2.7)
+    assert limit.limit(-2.0, -3.0, -0.4) == pytest.approx(-2.3)  # plan climbs 0.4: descend ≤ 0.3 net
+    # in metres through the autopilot's gain: twice the gain, half the distance
+    assert CatchUpLimit(0.1, 0.3, 2.0).limit(-3.0, -3.35, 0.3) == pytest.approx(-3.30)
+
+
+@pytest.mark.parametrize(
+    ("params", "autopilot", "gain"),
+    [({"MPC_Z_P": 1.5}, "PX4", 1.5), ({"PSC_POSZ_P": 0.8}, "ArduPilot", 0.8), ({}, "PX4", 1.0), (None, None, 1.0),
+     ({"MPC_Z_P": "x"}, "PX4", 1.0), ({"MPC_Z_P": 0.0}, "PX4", 1.0), ({"MPC_Z_P": float("nan")}, "PX4", 1.0)],
+)
+def test_z_position_gain_from_the_autopilots_parameters(params, autopilot, gain):
+    assert z_position_gain_per_s(params, autopilot) == gain

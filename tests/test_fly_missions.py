@@ -222,7 +222,10 @@ def test_vertical_mission_lands_at_the_planned_point_with_the_guard_silent(fake_
     rc, s, err = run_fly("vertical", fake.url, tmp_path, "--height", "5", "--config", cfg)
     assert rc == 0, err
     assert s["outcome"] == "completed" and s["abort_reason"] is None
-    assert 3.0 < s["descent_time_s"] < 10.0
+    # as planned, or later where the estimate trails the plan and the catch-up is limited (PX4 SITL:
+    # 1.0-1.6 × the planned time, bench/RESULTS.md)
+    t_f = json.loads((Path(s["log_dir"]) / "trajectory.json").read_text())["t_f_s"]
+    assert 0.9 * t_f < s["descent_time_s"] < 1.8 * t_f
     assert s["setpoint_rate_hz"] == pytest.approx(50.0, rel=0.05)
     assert_complete_log(s["log_dir"])
     g = pd.read_csv(Path(s["log_dir"]) / "guard.csv")
@@ -237,7 +240,8 @@ def test_vertical_mission_lands_at_the_planned_point_with_the_guard_silent(fake_
     # a PX4-like estimate (the fake's, as PX4's, wanders 0.3-0.8 m: ../shared/px4_sih)
     at_start = truth_at(st, s["log_dir"])
     assert math.hypot(last["n_m"] - at_start["n_m"], last["e_m"] - at_start["e_m"]) < LANDING_DRIFT_M
-    assert (st["depth_n"] <= 0).all()
+    assert (st[st["mode"] == "OFFBOARD"]["depth_n"] <= 0).all()
+    assert st["depth_n"].max() < 0.03  # PX4's own Land (0.7 m/s by its estimate) may graze the onset
     assert not (tr["kind"] == "crash").any()
 
 
@@ -266,7 +270,10 @@ def test_helix_mission_lands_at_the_planned_point_faster_than_the_vertical_basel
     off = st[st["mode"] == "OFFBOARD"]
     truth_margin = np.asarray(region.margin(off["w_mps"].to_numpy(), off["u_mps"].to_numpy()))
     assert truth_margin.min() > -ESTIMATE_VELOCITY_ERROR_MPS
-    assert (st["depth_n"] <= 0).all() and not (tr["kind"] == "crash").any()
+    assert (off["depth_n"] <= 0).all() and not (tr["kind"] == "crash").any()
+    # PX4's own Land descends at MPC_LAND_SPEED (0.7 m/s) by its estimate, 0.85 m/s true at worst here:
+    # it may graze the onset (0.85 m/s), never deep enough for a disturbance to show
+    assert st["depth_n"].max() < 0.03
     # it flew the helix (well away from the vertical line) and landed where it started: the plan
     # ends above its start point
     at_start = truth_at(st, s["log_dir"])
@@ -279,8 +286,8 @@ def test_helix_mission_lands_at_the_planned_point_faster_than_the_vertical_basel
     vertical = plan_vertical(prof, height_m=5.0, margin_mps=prof.vrs.margin_mps + vcfg["extra_margin_mps"],
                              accel_fraction=vcfg["accel_fraction"])  # fmt: skip
     assert s["descent_time_s"] < 0.75 * vertical.t_f_s
-    # … and about as planned: PX4 SITL flew this helix in 0.95-1.43 × its planned time (bench/RESULTS.md)
-    assert s["descent_time_s"] < 1.5 * meta["t_f_s"]
+    # … and about as planned: PX4 SITL flew this helix in 0.82-1.59 × its planned time (bench/RESULTS.md)
+    assert s["descent_time_s"] < 1.7 * meta["t_f_s"]
 
 
 def test_helix_flies_on_the_sih_quadx_fake_as_on_px4_sitl(fake_vehicle_factory, tmp_path):

@@ -56,6 +56,21 @@ def test_the_vertical_rule_ignores_horizontal_wander():
     assert not (dist <= 0.2).any()
 
 
+def test_a_biased_vertical_velocity_with_a_still_height_is_reached():
+    # PX4 SITL: EKF2's vertical velocity read 0.3 m/s off for seconds while its height held at the end
+    t, n, e, d, vd = _descent_trace(wander_m=0.0)
+    end = (0.0, 0.0, -2.0)
+    base = dt.descent_reached(t, n, e, d, vd, 0.0, end)
+    biased = np.where(t > 4.0, vd + 0.3, vd)
+    assert not (np.abs(biased[t > 4.0]) <= 0.2).any()  # on the velocity alone: never reached
+    r = dt.descent_reached(t, n, e, d, biased, 0.0, end)
+    # reached once a whole hold window of the height shows it still (not never, as on velocity alone)
+    assert r is not None and base.t_s <= r.t_s <= base.t_s + 0.5
+    # a vehicle really moving through the band at 0.3 m/s (height and velocity agree) is not reached
+    creep = np.where(t > 4.0, -2.15 + 0.3 * (t - 4.0), d)
+    assert dt.descent_reached(t, n, e, creep, np.where(t > 4.0, 0.3, vd), 0.0, end, t_stop_s=5.0) is None
+
+
 def test_the_hold_a_gap_and_the_stop_time():
     t, n, e, d, vd = _descent_trace(wander_m=0.0)
     end = (0.0, 0.0, -2.0)

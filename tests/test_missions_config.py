@@ -101,9 +101,13 @@ def test_tracking_margin_from_a_plan_table_and_its_problem():
     n_thrust = 4 * prof.max_thrust_per_rotor_n / prof.mass_kg
     assert p.f_min_mps2 == pytest.approx(0.2 * n_thrust) and p.f_max_mps2 == pytest.approx(0.75 * n_thrust)
     assert p.descent_max_mps == 1.3
+    assert p.thrust_rate_max_mps3 == 8.0
+    assert helix_problem_for_flight(prof, 5.0, 3.0, TrackingMargin(thrust_rate_max_mps3=5)).thrust_rate_max_mps3 == 5
     assert p.constraint.w_allow_mps == prof.w_allow_mps
     assert p.constraint.margin_mps == pytest.approx(prof.vrs.margin_mps + 0.4)
     with pytest.raises(FlighttestError, match="leaves no tilt"):
         helix_problem_for_flight(prof, 5.0, 3.0, TrackingMargin(tilt_margin_deg=42))
     with pytest.raises(FlighttestError, match="rate_fraction"):
         TrackingMargin(rate_fraction=0.0)
+    with pytest.raises(FlighttestError, match="thrust_rate_max_mps3"):
+        TrackingMargin(thrust_rate_max_mps3=0.0)

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.flight
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 LOG_FILES = ("meta.json", "flight.tlog", "setpoints.csv", "guard.csv", "events.jsonl", "preflight.json",
              "trajectory.csv", "trajectory.json", "summary.json")  # fmt: skip
-# the onset read from the log is known to about the estimate's descent-rate error (PX4-like: 0.12 m/s)
+# the onset read from the log is known to about the estimate's descent-rate error (PX4-like: 0.16 m/s)
 TOLERANCE_MPS = 0.15
 DETECTABLE_DEPTH_N = 0.03
 
@@ -126,9 +126,12 @@ def test_probe_finds_the_truth_onset(fake_vehicle_factory, tmp_path, truth_onset
     (report,) = json.loads(r.stdout)
     descents = [d for d in report["descents"] if d["mission"] == "probe"]
     assert descents and all(d["fluct_index_max"] is not None for d in descents)
-    loud = [d for d in descents if d["max_rate_mps"] > truth_onset + 0.05]
-    # the sweep's last descent runs on into the ladder's recovery and Land: labelled by where it began
-    assert loud and loud[0]["phase"] in ("stream", "abort_recover", "abort_land"), descents
+    # the loud one is the descent the detector stopped (an earlier sweep may read faster than the onset
+    # in the estimate, whose vertical error is 0.16 m/s, without being in the VRS); it runs on into the
+    # ladder's recovery and Land: labelled by where it began
+    loud = [d for d in descents if d["start_s"] <= abort["t_s"]][-1:]
+    assert loud and loud[0]["max_rate_mps"] > truth_onset, descents
+    assert loud[0]["phase"] in ("stream", "abort_recover", "abort_land"), descents
     assert loud[0]["fluct_index_max"] > 3.0, descents
     assert loud[0]["rate_rms_max_radps"] > 0.01
     # the earlier sweeps slower than the onset are quiet (the landing after the abort still shakes:

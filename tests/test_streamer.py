@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from flighttest.feedforward import CatchUpLimit
 from flighttest.link import VehicleLink
 from flighttest.streamer import Setpoint, SetpointStreamer, jitter_stats_ms
 
@@ -156,3 +157,27 @@ def test_watchdog_leaves_a_hold_when_the_loop_is_stuck(fake_vehicle_factory):
     assert len(hold) >= 1
     # it reached the vehicle while the loop was still stuck
     assert hold["unix_s"].iloc[0] - t_block < 0.4
+
+
+@pytest.mark.flight
+def test_catch_up_limit_sends_position_setpoints_near_the_vehicle_and_keeps_the_planned_end(fake_vehicle_factory):
+    # the vehicle (7 m up) is 2 m above a plan descending at 1 m/s from 5 m: each setpoint goes out
+    # 0.1 m below the vehicle (excess 0.1 m/s at gain 1); the plan's end (at rest) 0.3 m below it; the
+    # streamer still knows the planned end, where the mission's settle holds
+    fake = fake_vehicle_factory("x500")
+    above = (1.0, 2.0, -7.0)
+
+    async def body(streamer: SetpointStreamer):
+        streamer.here = lambda: above
+        streamer.catch_up = CatchUpLimit(excess_mps=0.1, floor_mps=0.3, gain_per_s=1.0)
+        rows = [_descending(k) for k in range(5)] + [Setpoint(0.0, 0.0, -4.9)]
+        result = await streamer.stream(lambda k: rows[k] if k < len(rows) else None, "stream")
+        return result, streamer.last, streamer.last_planned
+
+    result, last, planned = asyncio.run(_with_streamer(fake.url, body))
+    assert result == "done"
+    assert last.d_m == pytest.approx(-6.7) and last == last.hold()
+    assert planned == Setpoint(0.0, 0.0, -4.9)
+    rx = _received(fake)
+    descending = rx[rx["sp_vd_mps"] > 0.9]
+    assert len(descending) >= 5 and np.allclose(descending["sp_d_m"], -6.9, atol=1e-4)  # (MAVSDK may resend one)

@@ -263,13 +263,17 @@ def _campaign(args: argparse.Namespace, known: dict[str, Any]) -> int:
                 return 1
             if not args.only:
                 state.invalidate(steps[k + 1:])
-            state.begin(step)
-            known["step"] = step
+            ground = step not in FLIGHT_STEPS  # a flight handles Ctrl-C itself: its abort ladder
+            # a ground step's Ctrl-C handler is in place before campaign.json says it is running
+            stop_after = _stop_after_step(stop, out) if ground else contextlib.nullcontext()
             try:
-                if step in FLIGHT_STEPS:  # the flight handles Ctrl-C itself: its abort ladder
-                    outputs = RUNNERS[step](ctx)
-                else:
-                    with _stop_after_step(stop, out), out.status(f"{step}: {TITLES[step]} …"):
+                with stop_after:
+                    state.begin(step)
+                    known["step"] = step
+                    if ground:
+                        with out.status(f"{step}: {TITLES[step]} …"):
+                            outputs = RUNNERS[step](ctx)
+                    else:
                         outputs = RUNNERS[step](ctx)
             except KeyboardInterrupt:
                 state.finish(step, "interrupted", error="interrupted by the operator")

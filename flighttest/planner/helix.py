@@ -81,6 +81,9 @@ class HelixProblem:
     vehicle: str = ""
     # descent-speed bound (m/s, NED v_D): PX4 clips offboard velocity setpoints to MPC_Z_VEL_MAX_DN
     descent_max_mps: float | None = None
+    # collective-thrust rate bound (m/s³): a plan's thrust steps become vertical jerks the autopilot's
+    # velocity loop overshoots (None: unbounded, the paper's optimum)
+    thrust_rate_max_mps3: float | None = None
 
     def validate(self) -> None:
         for name, v in (("height", self.height_m), ("radius", self.radius_m), ("max speed", self.speed_max_mps),
@@ -114,6 +117,7 @@ class HelixProblem:
             "tilt_max_deg": math.degrees(self.tilt_max_rad),
             "speed_max_mps": self.speed_max_mps,
             "descent_max_mps": self.descent_max_mps,
+            "thrust_rate_max_mps3": self.thrust_rate_max_mps3,
             "wind_ned_mps": list(self.wind_ned_mps),
             "n_intervals": self.n_intervals,
             **self.constraint.summary(),
@@ -292,7 +296,7 @@ def _spec(p: HelixProblem, n: int) -> OcpSpec:
         path=path,
         path_lb=np.array([0.0, 0.0, 0.0, 0.0]),
         path_ub=np.array([inf, inf, inf, vmax**2]),
-        u_rate_max=np.concatenate([[inf], np.asarray(p.accel_max_rps2)]),
+        u_rate_max=np.concatenate([[p.thrust_rate_max_mps3 or inf], np.asarray(p.accel_max_rps2)]),
         smooth_weight=np.array([1e-6, 1e-4, 1e-4, 1e-4]),
         t_max_s=120.0,
     )

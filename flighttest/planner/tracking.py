@@ -35,6 +35,9 @@ class TrackingMargin:
     thrust_max_fraction: float = 0.75  # collective ≤ this × the rotors' maximum
     thrust_min_fraction: float = 0.2  # collective ≥ this × the rotors' maximum (never idle)
     descent_max_mps: float = 1.3  # v_D ≤ this: below PX4's MPC_Z_VEL_MAX_DN (1.5 m/s by default)
+    # collective thrust changes ≤ this (m/s³): the optimum's thrust steps at the helix's end (a climb,
+    # then a dip at +3 m/s² within 0.4 s) were overshot by PX4 SITL's vertical loop into the guard
+    thrust_rate_max_mps3: float = 8.0
 
     def __post_init__(self) -> None:
         checks = (
@@ -44,6 +47,7 @@ class TrackingMargin:
             ("thrust_max_fraction", 0 < self.thrust_max_fraction <= 1),
             ("thrust_min_fraction", 0 <= self.thrust_min_fraction < self.thrust_max_fraction),
             ("descent_max_mps", self.descent_max_mps > 0),
+            ("thrust_rate_max_mps3", self.thrust_rate_max_mps3 > 0),
         )
         for name, ok in checks:
             value = getattr(self, name)
@@ -100,4 +104,5 @@ def helix_problem_for_flight(
     )
     n_thrust = profile.n_rotors * profile.max_thrust_per_rotor_n / profile.mass_kg
     f_min = max(p.f_min_mps2, margin.thrust_min_fraction * n_thrust)
-    return replace(p, f_min_mps2=f_min, descent_max_mps=margin.descent_max_mps)
+    return replace(p, f_min_mps2=f_min, descent_max_mps=margin.descent_max_mps,
+                   thrust_rate_max_mps3=margin.thrust_rate_max_mps3)
