@@ -29,7 +29,7 @@ import numpy as np
 
 from flighttest.planner.cases import TABLE_II, detected_classes
 from flighttest.planner.helix import problem_for_vehicle, solve_helix
-from flighttest.planner.planar import _OCP_CACHE, PlanarProblem, solve_planar
+from flighttest.planner.planar import PlanarProblem, clear_ocp_cache, solve_planar
 from flighttest.planner.vertical import plan_vertical
 from flighttest.profiles import load_profile
 
@@ -146,7 +146,7 @@ def main() -> None:
     seq: dict[int, list[float]] = {n: [] for n in TABLE_II}
     sols = {}
     for _ in range(args.repeats):
-        _OCP_CACHE.clear()
+        clear_ocp_cache()
         for n, case in TABLE_II.items():
             sols[n] = solve_planar(case.problem)
             seq[n].append(sols[n].solve_s)

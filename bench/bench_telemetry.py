@@ -581,7 +581,7 @@ def log_writes(n: int = 3000) -> dict:
     import csv
     import io
 
-    from flighttest.flightlog import FlightLog, _fmt
+    from flighttest.flightlog import FlightLog, csv_number
     from flighttest.guard import Decision, GuardSample
 
     def run(fn) -> dict[str, float]:
@@ -609,7 +609,7 @@ def log_writes(n: int = 3000) -> dict:
     row = [1.0, 2.0, "ok", 0.1, 0.2, 0.3, 0.4, "none", "", *([0.1] * 11)]
 
     def fmt_only() -> None:
-        w.writerow([_fmt(float(x)) if isinstance(x, float | int) else x for x in row])
+        w.writerow([csv_number(float(x)) if isinstance(x, float | int) else x for x in row])
         if buf.tell() > 1_000_000:
             buf.seek(0)
             buf.truncate()

@@ -22,7 +22,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import IO, Any
 
-from flighttest.console import _clean
+from flighttest.console import json_safe
 
 FLUSH_EVERY_S = 0.5
 
@@ -45,7 +45,7 @@ def default_log_root() -> Path:
     return Path(os.environ.get("FLIGHTTEST_LOG_DIR", "logs"))
 
 
-def _fmt(v: Any) -> Any:
+def csv_number(v: Any) -> Any:
     if isinstance(v, float):
         return "" if not math.isfinite(v) else f"{v:.6g}" if abs(v) < 1e5 else f"{v:.3f}"
     return v
@@ -53,7 +53,7 @@ def _fmt(v: Any) -> Any:
 
 def write_json_atomic(path: Path, data: Any) -> None:
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(_clean(data), indent=2) + "\n", encoding="utf-8")
+    tmp.write_text(json.dumps(json_safe(data), indent=2) + "\n", encoding="utf-8")
     tmp.replace(path)
 
 
@@ -115,7 +115,8 @@ class FlightLog:
         if self.closed:
             return
         t, u = self.times(t_mono)
-        self._setpoints.writerow([_fmt(float(x)) for x in (t, u, n, e, d, vn, ve, vd, an, ae, ad, yaw_deg)] + [phase])
+        values = (t, u, n, e, d, vn, ve, vd, an, ae, ad, yaw_deg)
+        self._setpoints.writerow([csv_number(float(x)) for x in values] + [phase])
         self.flush_if_due()
 
     def guard(self, decision) -> None:
@@ -131,7 +132,7 @@ class FlightLog:
         )
         row = [t, u, decision.verdict, decision.w_mps, decision.u_mps, decision.margin_mps,
                decision.predicted_margin_mps, decision.action, decision.reason, *inputs]  # fmt: skip
-        self._guard.writerow([_fmt(float(x)) if isinstance(x, float | int) else x for x in row])
+        self._guard.writerow([csv_number(float(x)) if isinstance(x, float | int) else x for x in row])
         self.flush_if_due()
 
     def event(self, t_mono: float, event: str, **fields: Any) -> None:
@@ -139,7 +140,7 @@ class FlightLog:
             return
         t, u = self.times(t_mono)
         rec = {"t_s": round(t, 4), "unix_s": round(u, 4), "event": event, **fields}
-        self._events.write(json.dumps(_clean(rec), default=str) + "\n")
+        self._events.write(json.dumps(json_safe(rec), default=str) + "\n")
         # events are rare and matter most when something goes wrong: flush them at once
         self.flush()
 

@@ -14,6 +14,8 @@ import numpy as np
 from flighttest.aero import CONE_DEG, guard_margin_mps
 
 UNIT_QUAT_TOL = 1e-3
+# WGS-84 equatorial radius: local north/east metres from latitude/longitude (flat Earth over a flight)
+EARTH_RADIUS_M = 6_378_137.0
 
 
 def quat_to_rotmat(q_wxyz) -> np.ndarray:

@@ -230,6 +230,9 @@ class Guard:
         self.rate_std_dps = 0.0
         self.accel_std_mps2 = 0.0
         self.armed = True  # False: decisions are logged with action "none" (e.g. before streaming)
+        # False: the altitude floor is not judged (on the ground, in takeoff and landing, where being
+        # below it is the point); everything else still is
+        self.floor_active = True
         # False: fluctuation is measured but never judged (takeoff, climb, landing shake by design)
         self.fluct_active = True
         self.baseline_rate_std_dps: float | None = None
@@ -340,7 +343,7 @@ class Guard:
             return Decision(s.t_s, verdict, action, reason, w, u, margin, pmargin, s)
 
         # hard limits first: they hold in observe mode too
-        if lim.min_alt_m is not None and s.alt_m < lim.min_alt_m:
+        if self.floor_active and lim.min_alt_m is not None and s.alt_m < lim.min_alt_m:
             return dec(FLOOR, act, f"altitude {s.alt_m:.2f} m below floor {lim.min_alt_m:g} m")
         if lim.max_descent_mps is not None and s.vd_mps > lim.max_descent_mps:
             return dec(SPEED_CAP, act, f"descent {s.vd_mps:.2f} m/s above cap {lim.max_descent_mps:g} m/s")
@@ -520,6 +523,11 @@ class AbortLadder:
             self._last_land_t = t_s
             return CMD_LAND
         return None
+
+    def finish(self, t_s: float, why: str) -> None:
+        """End the ladder here (``DONE``): the pilot has the vehicle, it is on the ground, or the
+        ladder ran out of time. Nothing more is commanded."""
+        self._enter(t_s, Rung.DONE, why)
 
     def note(self, t_s: float, why: str) -> None:
         """A decision that keeps the rung (re-sending Land, telemetry lost or back): into the history."""

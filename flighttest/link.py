@@ -27,6 +27,8 @@ from typing import Any
 
 from flighttest.errors import FlighttestError
 
+# what the streamer calls on MAVSDK's synchronous offboard plugin (VehicleLink.offboard_setters)
+OFFBOARD_SETTERS = ("set_position_velocity_acceleration_ned", "set_velocity_ned")
 URL_RE = re.compile(r"^(udpin|udpout|tcpin|tcpout|udp|tcp|serial|serial_flowcontrol)://.+$")
 URL_HELP = "udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT or serial:///dev/ttyUSB0:57600"
 GCS_SYSID = 245  # QGroundControl uses 255; MAVSDK's ground-station default is 245
@@ -345,6 +347,20 @@ class VehicleLink:
         self.action = ActionAsync(self.system)
         self.offboard = OffboardAsync(self.system)
         self.param = ParamAsync(self.system)
+
+    def offboard_setters(self):
+        """MAVSDK's synchronous offboard plugin under ``OffboardAsync``: its setters only store the
+        setpoint and queue one message, so the streamer calls them on the loop, with no executor hop
+        that could be left in flight when the link closes (``flighttest.streamer``). The one place
+        flighttest reaches under MAVSDK's asyncio wrapper; ``tests/test_link_api.py`` fails loudly if
+        MAVSDK changes it."""
+        plugin = getattr(self.offboard, "_plugin", None)
+        if plugin is None or not all(callable(getattr(plugin, name, None)) for name in OFFBOARD_SETTERS):
+            raise FlighttestError(
+                "this MAVSDK has no synchronous offboard plugin under OffboardAsync: flighttest needs mavsdk 4.x "
+                "(pip install -e . installs the version it was tested with)"
+            )
+        return plugin
 
     def _on_mavsdk_log(self, level: str, message: str) -> None:
         """A MAVSDK log line (on MAVSDK's thread): WARN and ERROR kept for error messages and, once per

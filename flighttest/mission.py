@@ -209,13 +209,9 @@ class MissionRunner:
         st = self.link.state
         acc = self.streamer.planned_accel_mps2(self.limits.horizon_s) if self.streamer is not None else (0, 0, 0)
         s = gd.GuardSample(t, st.vn_mps, st.ve_mps, st.vd_mps, *st.q, st.alt_m, *self._wind(), *acc)
+        # below the floor is normal on the ground and in takeoff/landing: there the guard judges the rest
+        self.guard.floor_active = self.floor_active
         d = self.guard.on_sample(s)
-        if not self.floor_active and d.verdict == gd.FLOOR:
-            # below the floor is normal on the ground and in takeoff/landing: judge the rest
-            saved = self.limits
-            self.guard.limits = gd.GuardLimits(**{**saved.__dict__, "min_alt_m": None})
-            d = self.guard.on_sample(s)
-            self.guard.limits = saved
         self.last_decision = d
         if self.log is not None:
             self.log.guard(d)
@@ -248,13 +244,13 @@ class MissionRunner:
         if self.phase == "land" and new in PILOT_MODES and not self.ladder.active:
             # the pilot takes the landing over: send nothing more (the ladder, once started, sees it itself)
             self.abort(f"pilot took over ({new}) while landing", gd.Rung.LAND)
-            self.ladder._enter(time.monotonic(), gd.Rung.DONE, f"pilot in control ({new})")
+            self.ladder.finish(time.monotonic(), f"pilot in control ({new})")
             return
         if not self.expect_offboard or new == "OFFBOARD" or self.ladder.active:
             return
         if new in PILOT_MODES:
             self.abort(f"pilot took over ({new})", gd.Rung.HOLD)
-            self.ladder._enter(time.monotonic(), gd.Rung.DONE, f"pilot in control ({new})")
+            self.ladder.finish(time.monotonic(), f"pilot in control ({new})")
         elif new == "LAND":
             self.abort(f"left offboard unexpectedly ({old} → {new})", gd.Rung.HOLD)
         else:
@@ -443,7 +439,7 @@ class MissionRunner:
             return self._outcome("aborted", self.ladder.reason)
         try:
             self._freeze_heap()  # connected, nothing flying yet: the one long collection goes here
-            self.streamer = SetpointStreamer(link.offboard._plugin, self.log, self.fl.rate_hz,
+            self.streamer = SetpointStreamer(link.offboard_setters(), self.log, self.fl.rate_hz,
                                              here=lambda: (link.state.n_m, link.state.e_m, link.state.d_m))  # fmt: skip
             link.on_posvel.append(self._on_posvel)
             link.on_attitude.append(self.guard.note_state_sample)
@@ -718,7 +714,7 @@ class MissionRunner:
             logged = len(self.ladder.history)
 
         if not st.armed and not st.in_air:
-            self.ladder._enter(time.monotonic(), gd.Rung.DONE, "vehicle on the ground")
+            self.ladder.finish(time.monotonic(), "vehicle on the ground")
         while not self.ladder.done:
             while not self._ladder_cmds.empty():
                 await self._execute(self._ladder_cmds.get_nowait())
@@ -738,7 +734,7 @@ class MissionRunner:
             if cmd:
                 await self._execute(cmd)
             if not self.ladder.done and now - t_start > LADDER_TIMEOUT_S:
-                self.ladder._enter(now, gd.Rung.DONE, "ladder timed out")
+                self.ladder.finish(now, "ladder timed out")
             log_decisions()
             await asyncio.sleep(0.05)
         log_decisions()

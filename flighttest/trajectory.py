@@ -81,7 +81,7 @@ DRIFT_TOL_M = 0.10
 DRIFT_TOL_MPS = 0.10
 
 
-def _paths(path: Path | str) -> tuple[Path, Path]:
+def file_paths(path: Path | str) -> tuple[Path, Path]:
     """``(csv, json)`` paths for ``NAME``, ``NAME.csv`` or ``NAME.json``."""
     p = Path(path)
     stem = p.with_suffix("") if p.suffix.lower() in {".csv", ".json"} else p
@@ -322,7 +322,7 @@ class Trajectory:
     # -- files ------------------------------------------------------------------------------------
     def save(self, path: Path | str) -> tuple[Path, Path]:
         """Write ``NAME.csv`` and ``NAME.json``; returns both paths."""
-        csv_path, json_path = _paths(path)
+        csv_path, json_path = file_paths(path)
         # each file appears whole (a reader never sees half a CSV); missing folders are created
         with atomic_write(csv_path) as tmp:
             self.df.to_csv(tmp, index=False, float_format="%.9g")
@@ -339,7 +339,7 @@ class Trajectory:
         """
         if not str(path).strip():
             raise FlighttestError("trajectory file: the path is empty")
-        csv_path, json_path = _paths(path)
+        csv_path, json_path = file_paths(path)
         for p, limit in ((csv_path, MAX_CSV_BYTES), (json_path, MAX_JSON_BYTES)):
             try:
                 check_input_file(p, "trajectory file", limit)

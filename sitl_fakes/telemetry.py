@@ -21,7 +21,7 @@ from sitl_fakes.physics import rotate_ned_to_body
 from sitl_fakes.px4 import Mode
 
 M = mavlink
-EARTH_RADIUS_M = 6_371_000.0
+EARTH_RADIUS_M = 6_378_137.0  # WGS-84 equatorial, as flighttest's loaders read it back
 PX4_VERSION = (1 << 24) | (15 << 16) | (0 << 8) | 255  # v1.15.0 official
 CAPABILITIES = (
     M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT

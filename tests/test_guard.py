@@ -158,6 +158,24 @@ def test_floor_and_speed_cap_hold_in_observe_mode():
     assert d.verdict == g.FLOOR and d.aborts
 
 
+def test_floor_not_judged_where_it_is_off_but_the_rest_is():
+    # on the ground and in takeoff/landing the runner turns the floor off: below it is the point there
+    gd = g.Guard(limits(min_alt_m=2.0, max_descent_mps=3.0))
+    gd.floor_active = False
+    assert gd.on_sample(sample(v=(0, 0, 0.1), alt=0.5)).verdict == g.OK
+    assert gd.on_sample(sample(v=(0, 0, 3.2), alt=0.5)).verdict == g.SPEED_CAP
+    gd.floor_active = True
+    assert gd.on_sample(sample(v=(0, 0, 0.1), alt=0.5)).verdict == g.FLOOR
+
+
+def test_ladder_finish_ends_it_with_nothing_more_commanded():
+    lad = g.AbortLadder()
+    assert lad.trigger(10.0, "guard") == g.CMD_RECOVER
+    lad.finish(10.5, "pilot in control (POSCTL)")
+    assert lad.done and lad.rung == g.Rung.DONE and lad.history[-1] == (10.5, "DONE", "pilot in control (POSCTL)")
+    assert lad.step(g.LadderObservation(t_s=11.0, vd_mps=2.0, region_ok=False)) is None
+
+
 def test_disarmed_guard_logs_but_does_not_act():
     gd = g.Guard(limits())
     gd.armed = False

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from flighttest.analysis.identify import IdentifyConfig, _probe_samples, identify_onset, sweep_fluctuation
+from flighttest.analysis.identify import IdentifyConfig, identify_onset, probe_samples, sweep_fluctuation
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
 from flighttest.analysis.report import draw_fluctuation, plot_fluctuation, probe_fluctuation_bins
@@ -131,7 +131,7 @@ def test_the_px4_sih_probe_plots_without_an_onset():
     # the mission's landing (after its last setpoint) is not part of what identify fits
     stream_end = next(e["t_s"] for e in a.log.events if e.get("event") == "stream_end")
     land = next(e["t_s"] for e in a.log.events if e.get("event") == "phase" and e.get("phase") == "land")
-    ps = _probe_samples(a.log, a.profile, IdentifyConfig())
+    ps = probe_samples(a.log, a.profile, IdentifyConfig())
     assert ps.t_s[ps.use].max() <= land + 0.1
     fig = plt.figure()
     bins = draw_fluctuation(fig, a, None)

@@ -46,7 +46,7 @@ def _descending(k: int) -> Setpoint:
 
 async def _with_streamer(url: str, body, **kw):
     async with VehicleLink(url, telemetry_hz=10.0, discover_s=0.3) as link:
-        streamer = SetpointStreamer(link.offboard._plugin, None, 50.0, here=lambda: HERE, **kw)
+        streamer = SetpointStreamer(link.offboard_setters(), None, 50.0, here=lambda: HERE, **kw)
         try:
             return await body(streamer)
         finally:

@@ -92,8 +92,8 @@ import numpy as np
 import pandas as pd
 
 from flighttest.analysis.schema import HeightSource, motor_columns, resample
-from flighttest.analysis.segment import GLITCH_COLUMNS, _runs
-from flighttest.analysis.segment import _samples as _window
+from flighttest.analysis.segment import GLITCH_COLUMNS, true_runs
+from flighttest.analysis.segment import samples_in as _window
 from flighttest.errors import FlighttestError
 
 KIND_RANK = {"estimator": 0, "baro": 1, "gps": 2, "rangefinder": 3}
@@ -432,7 +432,7 @@ def _disagreement(i: int, srcs: list[_Src], t: np.ndarray, flying: np.ndarray, c
     s.max_disagreement_m = _nanmax(np.abs(diff[valid]))
     bad = valid & (np.abs(diff) > tol)
     spans: list[list[int]] = []
-    for a, b in _runs(bad):
+    for a, b in true_runs(bad):
         a, b = _extend(diff, t, int(a), int(b), bad, cfg)
         if spans and t[a] - t[spans[-1][1]] < cfg.merge_gap_s:
             spans[-1][1] = max(b, spans[-1][1])

@@ -351,7 +351,7 @@ def _probe_mask(log: FlightLog, t: np.ndarray, phases: tuple[str, ...] = PROBE_P
 
 
 @dataclass(frozen=True)
-class _ProbeSamples:
+class ProbeSamples:
     """What the fit works on, per state sample: the windowed fluctuation power of the selected samples
     (NaN elsewhere) and the blade-frame descent speed."""
 
@@ -366,7 +366,7 @@ class _ProbeSamples:
     signals: tuple[str, ...]
 
 
-def _probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) -> _ProbeSamples:
+def probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) -> ProbeSamples:
     state = log.state
     if "glitch" not in state:  # not analysed yet: the trusted height and its glitch flags, as analyse has them
         prepare_state(log)
@@ -388,13 +388,13 @@ def _probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig)
         use &= probe
     # windows average over selected samples only: the recovery's shaking must not leak back in
     y_all = _centred_mean(np.where(use, power, np.nan), n_win)
-    return _ProbeSamples(t, w_all, y_all, use, hover, probe is not None, dt, n_win, tuple(signals))
+    return ProbeSamples(t, w_all, y_all, use, hover, probe is not None, dt, n_win, tuple(signals))
 
 
 def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig | None = None) -> Onset:
     cfg = cfg or IdentifyConfig()
     evidence = check_probe(log)  # before any fit: an onset comes only from a probe's sweep
-    ps = _probe_samples(log, profile, cfg)
+    ps = probe_samples(log, profile, cfg)
     t, w_all, y_all, use, dt, n_win = ps.t_s, ps.w_mps, ps.power, ps.use, ps.dt_s, ps.n_win
     descending = use & (w_all > cfg.min_speed_mps)
     if descending.sum() < 3 * cfg.min_samples_above:
@@ -519,7 +519,7 @@ def sweep_fluctuation(
     ``attrs``: ``selection`` (one line saying which rule chose the samples), ``phased``,
     ``hover_power``, ``hover_samples``, ``hover_from``, ``signals``."""
     cfg = cfg or IdentifyConfig()
-    ps = _probe_samples(log, profile, cfg)
+    ps = probe_samples(log, profile, cfg)
     t = ps.t_s
     ref, hover_from = ps.use & ps.hover, "hover samples"
     if ref.sum() < ps.n_win:

@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from flighttest import aero
 from flighttest.errors import FlighttestError
 
 POSITION = ["n_m", "e_m", "d_m"]
@@ -73,7 +74,7 @@ STATE_COLUMNS = [
     "boot_s",
 ]
 MAX_MOTORS = 8
-G_MPS2 = 9.80665
+G_MPS2 = aero.G_MPS2  # (re-exported: the loaders' name for it)
 
 # What each missing stream costs, for FlightLog.missing.
 CONSEQUENCE = {

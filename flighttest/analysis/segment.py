@@ -68,14 +68,14 @@ SEGMENT_RANGES: dict[str, Range] = {
 }
 
 
-def _samples(t: np.ndarray, seconds: float) -> int:
+def samples_in(t: np.ndarray, seconds: float) -> int:
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
     return max(1, round(seconds / max(dt, 1e-6)))
 
 
 def flag_glitches(t: np.ndarray, d: np.ndarray, cfg: SegmentConfig) -> np.ndarray:
     """Boolean mask of altitude samples that jump away from their neighbours."""
-    win = _samples(t, cfg.glitch_window_s) | 1
+    win = samples_in(t, cfg.glitch_window_s) | 1
     med = pd.Series(d).rolling(win, center=True, min_periods=1).median().to_numpy()
     off = np.abs(d - med) > cfg.glitch_jump_m
     speed = np.abs(np.diff(d)) / np.maximum(np.diff(t), 1e-6)
@@ -87,7 +87,7 @@ def flag_glitches(t: np.ndarray, d: np.ndarray, cfg: SegmentConfig) -> np.ndarra
     return off | (fast & (np.abs(d - med) > 0.5 * cfg.glitch_jump_m))
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """(first, last) indices of the True runs."""
     if not mask.any():
         return []
@@ -134,7 +134,7 @@ GLITCH_COLUMNS = ["start_s", "end_s", "duration_s", "max_jump_m", "kind", "sourc
 def glitch_table(t: np.ndarray, d: np.ndarray, glitch: np.ndarray, source: str | None = None) -> pd.DataFrame:
     """The "jump" glitch spans of height ``d`` (NED down) flagged in ``glitch``."""
     rows = []
-    for a, b in _runs(glitch):
+    for a, b in true_runs(glitch):
         ref = d[a - 1] if a > 0 else d[b + 1] if b + 1 < len(d) else np.nan
         rows.append(
             {
@@ -169,12 +169,12 @@ def find_descents(
     if jump.any() and (~jump).sum() >= 2:
         d[jump] = np.interp(t[jump], t[~jump], d_raw[~jump])
     h = -d
-    n_s = _samples(t, cfg.smooth_s)
+    n_s = samples_in(t, cfg.smooth_s)
     rate = _rate(t, h, cfg.smooth_s)
     vd = state["vd_mps"].to_numpy(float)
     vd_s = pd.Series(vd).rolling(n_s, center=True, min_periods=1).mean().to_numpy()
 
-    runs = _runs(rate > cfg.rate_threshold_mps)
+    runs = true_runs(rate > cfg.rate_threshold_mps)
     merged: list[list[int]] = []
     for a, b in runs:
         if merged and t[a] - t[merged[-1][1]] < cfg.merge_gap_s:
@@ -212,7 +212,7 @@ def find_descents(
         t0 = _crossing(t, h, i0, h0 - cfg.start_tol_m)
         # end: first sample from which |h − h1| ≤ tol for settle_hold_s; unsettled descents end where
         # they first reach the end band (or just before the next descent starts)
-        hold_n = _samples(t, cfg.settle_hold_s)
+        hold_n = samples_in(t, cfg.settle_hold_s)
         inside = np.abs(h[i0:limit] - h1) <= cfg.end_tol_m
         stay = pd.Series(inside[::-1]).rolling(hold_n, min_periods=1).min().to_numpy()[::-1].astype(bool)
         cand = np.flatnonzero(inside & stay)

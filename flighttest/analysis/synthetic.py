@@ -31,13 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
+from flighttest.aero import G_MPS2
 from flighttest.analysis.schema import ISA_SEA_LEVEL_PA
-from flighttest.frames import quat_from_euler, quat_to_euler
+from flighttest.frames import EARTH_RADIUS_M, quat_from_euler, quat_to_euler
 
-G = 9.80665
+G = G_MPS2
 UNIX0 = 1_767_225_600.0  # 2026-01-01, the wall clock of synthetic tlogs
 LAT0_DEG, LON0_DEG, HOME_AMSL_M = 47.3977, 8.5456, 488.0
-M_PER_DEG = math.pi / 180 * 6_378_137.0
+M_PER_DEG = math.pi / 180 * EARTH_RADIUS_M
 RANGEFINDER_MIN_M, RANGEFINDER_MAX_M = 0.2, 40.0
 # parameters the writers log (ints are integer parameters: PX4 sends those byte-wise over MAVLink)
 PX4_PARAMS: dict[str, float | int] = {

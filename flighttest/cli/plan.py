@@ -134,14 +134,14 @@ def _constraint(args: argparse.Namespace, profile: VehicleProfile, paper: bool):
 def _out_path(args: argparse.Namespace, default: str) -> Path:
     """The output stem, its two files and the plot checked before anything is solved: a plan that
     cannot be written is not computed (``-o ''`` or a path under a file is one line, not a traceback)."""
-    from flighttest.trajectory import _paths
+    from flighttest.trajectory import file_paths
 
     stem = args.output if args.output is not None else str(Path("trajectories") / default)
     if not str(stem).strip():
         raise FlighttestError("-o/--output: the path is empty")
     if str(stem).endswith(("/", os.sep)):
         raise FlighttestError(f"-o/--output {stem!r}: names a folder; give a file stem such as DIR/descent")
-    for f in _paths(stem):
+    for f in file_paths(stem):
         ip.check_output_path(f, "-o/--output")
     if args.plot is not None:
         ip.check_output_path(args.plot, "--plot", ip.IMAGE_SUFFIXES)

@@ -190,6 +190,13 @@ class MinTimeOcp:
         self.ubg = np.concatenate(ubg)
         self.lbz, self.ubz = self._bounds()
 
+    def with_bounds_of(self, spec: OcpSpec) -> MinTimeOcp:
+        """Solve ``spec``'s bounds with this compiled NLP (a problem of the same structure whose box
+        bounds — start, end, state and control limits — differ): no new compilation."""
+        self.spec = spec
+        self.lbz, self.ubz = self._bounds()
+        return self
+
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         s = self.spec
         n = s.n_intervals

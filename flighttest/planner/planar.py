@@ -299,6 +299,11 @@ def _spec(p: PlanarProblem, n: int) -> OcpSpec:
 
 
 _OCP_CACHE: dict[tuple, MinTimeOcp] = {}
+
+
+def clear_ocp_cache() -> None:
+    """Forget the compiled planar NLPs (a benchmark that times compilation starts cold)."""
+    _OCP_CACHE.clear()
 REFINE_TOL_MPS = 1e-3
 REFINE_ROUNDS = 3
 # The coarse multi-start stops once starts of two different guess families (oblique, zig-zag with
@@ -316,11 +321,8 @@ def _ocp(p: PlanarProblem, n: int, verbose: bool) -> MinTimeOcp:
     key = (n, p.constraint, p.backoff_mps, p.wind_y_mps, p.wind_z_mps, verbose)
     ocp = _OCP_CACHE.get(key)
     if ocp is None:
-        ocp = _OCP_CACHE[key] = MinTimeOcp(spec, verbose=verbose)
-    else:
-        ocp.spec = spec
-        ocp.lbz, ocp.ubz = ocp._bounds()
-    return ocp
+        return _OCP_CACHE.setdefault(key, MinTimeOcp(spec, verbose=verbose))
+    return ocp.with_bounds_of(spec)
 
 
 def _attempt(r: OcpResult) -> dict:

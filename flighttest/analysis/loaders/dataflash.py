@@ -52,10 +52,9 @@ from flighttest.analysis.schema import (
     resample,
 )
 from flighttest.errors import FlighttestError
-from flighttest.frames import quat_from_euler
+from flighttest.frames import EARTH_RADIUS_M, quat_from_euler
 
 MAX_GAP_S = 1.0
-EARTH_RADIUS_M = 6_378_137.0
 DF_MAGIC = b"\xa3\x95"
 EV_ARMED, EV_DISARMED = 10, 11
 

@@ -57,6 +57,7 @@ from pymavlink import mavutil
 
 from flighttest.analysis.loaders.mavlink_frames import Decoded, decode, dialect, read_frames
 from flighttest.analysis.schema import (
+    G_MPS2,
     FlightLog,
     HeightSource,
     build_state,
@@ -70,10 +71,9 @@ from flighttest.analysis.schema import (
     stream_rate_hz,
 )
 from flighttest.errors import FlighttestError
-from flighttest.frames import body_to_ned, quat_from_euler
+from flighttest.frames import EARTH_RADIUS_M, body_to_ned, quat_from_euler
 
 MAX_GAP_S = 1.0
-EARTH_RADIUS_M = 6_378_137.0
 MAV_FRAME_BODY_FRD = 12
 MAV_TYPE_GCS = 6
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # a downward-facing distance sensor
@@ -288,7 +288,7 @@ def load_tlog(path: Path) -> FlightLog:
         ai = resample(when(imu), acc, t, MAX_GAP_S)
     elif (imu := dec["SCALED_IMU"]) is not None:
         f = imu.fields
-        acc = np.column_stack([f["xacc"], f["yacc"], f["zacc"]]).astype(float) * 9.80665e-3
+        acc = np.column_stack([f["xacc"], f["yacc"], f["zacc"]]).astype(float) * G_MPS2 * 1e-3
         ai = resample(when(imu), acc, t, MAX_GAP_S)
     else:
         ai = None
