@@ -41,7 +41,7 @@ CLIMB_RATE_MPS = 1.0
 HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag before it judges them
 # settled: within this of the hover point, this slow (PX4's estimate wanders 0.3-0.8 m and its velocity
 # is off by 0.1-0.2 m/s: ../shared/px4_sih; tighter and a real vehicle never settles)
-START_TOL_M = 0.6
+SETTLE_TOL_M = 0.6
 SETTLE_SPEED_MPS = 0.25
 SETTLE_WINDOW_S = 1.0  # … or its position moved that slowly over this window (flighttest.settling)
 LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
@@ -676,7 +676,7 @@ class MissionRunner:
         st = self.link.state
         t0 = time.monotonic()
         settled_since = None
-        check = SettleCheck((sp.n_m, sp.e_m, sp.d_m), START_TOL_M, SETTLE_SPEED_MPS, SETTLE_WINDOW_S)
+        check = SettleCheck((sp.n_m, sp.e_m, sp.d_m), SETTLE_TOL_M, SETTLE_SPEED_MPS, SETTLE_WINDOW_S)
 
         def done() -> bool:
             nonlocal settled_since

@@ -59,7 +59,7 @@ REQUIRED_META = ("format", "kind", "vehicle", "problem", "status", "t_f_s")
 
 # Tolerances of the loader's limit checks: planners work to solver tolerance, so a hair over a
 # bound is numerics, not a plan that breaks the vehicle.
-START_TOL_M = 1e-3
+ORIGIN_TOL_M = 1e-3
 LIMIT_REL_TOL = 0.01
 TILT_TOL_DEG = 0.5
 QUAT_NORM_TOL = 1e-3
@@ -176,7 +176,7 @@ class Trajectory:
             i = int(np.argmax(steps <= 0))
             raise FlighttestError(f"{where}: time not strictly increasing at row {i + 2} (t={t[i + 1]:g} s)")
         start = df[["n_m", "e_m", "d_m"]].iloc[0].to_numpy()
-        if np.abs(start).max() > START_TOL_M:
+        if np.abs(start).max() > ORIGIN_TOL_M:
             raise FlighttestError(f"{where}: positions must be relative to the start (first row {start.tolist()})")
         self._check_bounds(where)  # before any arithmetic on the values: nothing overflows after it
         if quat_present:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from flighttest.errors import FlighttestError
 from flighttest.missions_config import MissionConfig
+from flighttest.plan_config import HelixPlanConfig
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.helix import solve_helix
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
@@ -25,15 +26,16 @@ CONFIG = Path(__file__).with_suffix(".toml")
 
 def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
     p = cfg.plan
-    if p.get("trajectory"):
-        return Trajectory.load(Path(cfg.path or CONFIG).parent / str(p["trajectory"]), profile)
+    hp = HelixPlanConfig.from_table(p)
+    if hp.trajectory:
+        return Trajectory.load(Path(cfg.path or CONFIG).parent / hp.trajectory, profile)
     problem = helix_problem_for_flight(
         profile,
-        height_m=float(p.get("descent_m", 5.0)),
-        radius_m=float(p.get("radius_m", 3.0)),
+        height_m=hp.descent_m,
+        radius_m=hp.radius_m,
         margin=TrackingMargin.from_plan(p),
-        n_intervals=int(p.get("n_intervals", 60)),
-        n_coarse=int(p.get("n_coarse", 30)),
+        n_intervals=hp.n_intervals,
+        n_coarse=hp.n_coarse,
     )
     sol = solve_helix(problem)
     if not sol.success:

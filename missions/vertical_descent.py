@@ -10,6 +10,7 @@ braking within the vehicle's limits. Edit ``vertical_descent.toml`` or copy this
 from pathlib import Path
 
 from flighttest.missions_config import MissionConfig
+from flighttest.plan_config import VerticalPlanConfig
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
 from flighttest.profiles import VehicleProfile
@@ -19,13 +20,13 @@ CONFIG = Path(__file__).with_suffix(".toml")
 
 
 def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
-    p = cfg.plan
+    p = VerticalPlanConfig.from_table(cfg.plan)
     vp = plan_vertical(
         profile,
-        height_m=float(p.get("descent_m", 3.0)),
+        height_m=p.descent_m,
         # the guard's own bound minus a tracking margin, so the guard stays silent
-        margin_mps=profile.vrs.margin_mps + float(p.get("extra_margin_mps", 0.35)),
-        accel_fraction=float(p.get("accel_fraction", 0.15)),
+        margin_mps=profile.vrs.margin_mps + p.extra_margin_mps,
+        accel_fraction=p.accel_fraction,
     )
     return vertical_trajectory(vp, profile.name, profile.mass_kg)
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from flighttest.errors import FlighttestError
 from flighttest.missions_config import MissionConfig
+from flighttest.plan_config import ProbePlanConfig
 from flighttest.planner.export import probe_trajectory
 from flighttest.planner.probe import plan_probe
 from flighttest.profiles import VehicleProfile
@@ -27,34 +28,28 @@ CONFIG = Path(__file__).with_suffix(".toml")
 
 def top_speed_mps(profile: VehicleProfile, cfg: MissionConfig) -> float:
     """The sweep's top descent speed: explicit, else a multiple of the vehicle's ``w_allow``."""
-    p = cfg.plan
-    if "max_descent_mps" in p:
-        return float(p["max_descent_mps"])
-    return float(p.get("max_descent_ratio", 1.75)) * profile.w_allow_mps
+    return ProbePlanConfig.from_table(cfg.plan).top_speed_mps(profile.w_allow_mps)
 
 
 def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
-    p, fl = cfg.plan, cfg.flight
-    top = top_speed_mps(profile, cfg)
+    p, fl = ProbePlanConfig.from_table(cfg.plan), cfg.flight
+    top = p.top_speed_mps(profile.w_allow_mps)
     cap = cfg.guard.max_descent_mps
     if cap is not None and cap <= top:
         raise FlighttestError(
             f"probe: the guard's descent cap {cap:g} m/s must exceed the sweep's top speed {top:.2f} m/s "
             "(raise [guard] max_descent_mps or lower the top speed)"
         )
-    frac = float(p.get("accel_fraction", 0.5))
-    if not 0 < frac <= 1:
-        raise FlighttestError(f"probe: accel_fraction must lie in (0, 1] (got {frac:g})")
     pp = plan_probe(
-        amplitude_m=float(p.get("amplitude_m", 2.0)),
-        omega0_rps2=float(p.get("omega0_rps2", 0.05)),
-        ramp_s=float(p.get("ramp_s", 3.0)),
+        amplitude_m=p.amplitude_m,
+        omega0_rps2=p.omega0_rps2,
+        ramp_s=p.ramp_s,
         max_descent_mps=top,
-        duration_s=float(p.get("duration_s", 40.0)),
+        duration_s=p.duration_s,
         start_alt_m=fl.start_height_m,
         floor_alt_m=fl.min_alt_m,
-        max_accel_down_mps2=frac * profile.max_accel_down_mps2,
-        max_accel_up_mps2=frac * profile.max_accel_up_mps2,
+        max_accel_down_mps2=p.accel_fraction * profile.max_accel_down_mps2,
+        max_accel_up_mps2=p.accel_fraction * profile.max_accel_up_mps2,
     )
     return probe_trajectory(pp, profile.name, profile.mass_kg)
 

@@ -18,11 +18,13 @@ from rich.table import Table
 from flighttest import inputs as ip
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
+from flighttest.mission_scripts import mission_config_path
+from flighttest.missions_config import load_mission_config
+from flighttest.plan_config import ProbePlanConfig, VerticalPlanConfig
 from flighttest.profiles import VehicleProfile, load_profile
 
 SOLVER_FAILED = 1
-# Share of the vehicle's vertical acceleration the probe reference may ask for (the rest: control).
-PROBE_ACCEL_FRACTION = 0.8
+PROBE, VERTICAL = ProbePlanConfig(), VerticalPlanConfig()  # `flighttest fly`'s plan defaults (flighttest.plan_config)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -71,10 +73,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     ph.set_defaults(func=cmd_helix)
 
     pv = psub.add_parser("vertical", help="fastest straight-down descent keeping w ≤ w_allow (closed form)")
-    pv.add_argument("--height", type=ip.HEIGHT_M, default=5.0, metavar="M", help="descent height (default 5)")
+    pv.add_argument("--height", type=ip.HEIGHT_M, default=VERTICAL.descent_m, metavar="M",
+                    help=f"descent height (default {VERTICAL.descent_m:g}, as `fly vertical`)")
     pv.add_argument("--w-allow", type=ip.W_ALLOW_POSITIVE_MPS, metavar="MPS", help="override the profile's w_allow")
     pv.add_argument("--margin", type=ip.MARGIN_MPS, metavar="MPS", help="override the profile's guard margin")
-    pv.add_argument("--accel-fraction", type=ip.FRACTION, default=0.8, help="share of the accel limits (0.8)")
+    pv.add_argument("--extra-margin", type=ip.MARGIN_MPS, default=VERTICAL.extra_margin_mps, metavar="MPS",
+                    help="cruise this far inside the guard's bound on top of its margin, room for the autopilot "
+                         f"(default {VERTICAL.extra_margin_mps:g}, as `fly vertical`; 0: the bound)")  # fmt: skip
+    pv.add_argument("--accel-fraction", type=ip.FRACTION, default=VERTICAL.accel_fraction,
+                    help=f"share of the accel limits (default {VERTICAL.accel_fraction:g}, as `fly vertical`)")
     _common(pv, kind="vertical", constraint=False)
     pv.set_defaults(func=cmd_vertical)
 
@@ -84,14 +91,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Descent speed grows slowly; ends at the last whole cycle under the speed cap and duration; "
         "the amplitude must fit above the altitude floor. Output lists when each descent speed is first reached.",
     )
-    pr.add_argument("--amplitude", type=ip.HEIGHT_M, default=2.0, metavar="M", help="max depth below start (2)")
-    pr.add_argument("--omega0", type=ip.CHIRP_RATE_RPS2, default=0.05, metavar="RPS2",
-                    help="chirp rate ω0, rad/s² (0.05)")
-    pr.add_argument("--ramp", type=ip.DURATION_S, default=3.0, metavar="S", help="ramp-in time (3)")
-    pr.add_argument("--max-descent-speed", type=ip.SPEED_MPS, default=3.0, metavar="MPS", help="speed cap (3)")
-    pr.add_argument("--duration", type=ip.DURATION_S, default=60.0, metavar="S", help="longest duration (60)")
-    pr.add_argument("--start-alt", type=ip.START_HEIGHT_M, default=10.0, metavar="M", help="start altitude AGL (10)")
-    pr.add_argument("--floor", type=ip.ALTITUDE_FLOOR_M, default=2.0, metavar="M", help="altitude floor AGL (2)")
+    # the defaults are `flighttest fly probe`'s (flighttest.plan_config, the probe mission's [flight])
+    pr.add_argument("--amplitude", type=ip.HEIGHT_M, default=PROBE.amplitude_m, metavar="M",
+                    help=f"max depth below start ({PROBE.amplitude_m:g})")
+    pr.add_argument("--omega0", type=ip.CHIRP_RATE_RPS2, default=PROBE.omega0_rps2, metavar="RPS2",
+                    help=f"chirp rate ω0, rad/s² ({PROBE.omega0_rps2:g})")
+    pr.add_argument("--ramp", type=ip.DURATION_S, default=PROBE.ramp_s, metavar="S",
+                    help=f"ramp-in time ({PROBE.ramp_s:g})")
+    pr.add_argument("--max-descent-speed", type=ip.SPEED_MPS, metavar="MPS",
+                    help=f"speed cap (default {PROBE.max_descent_ratio:g} × the profile's w_allow)")
+    pr.add_argument("--duration", type=ip.DURATION_S, default=PROBE.duration_s, metavar="S",
+                    help=f"longest duration ({PROBE.duration_s:g})")
+    pr.add_argument("--start-alt", type=ip.START_HEIGHT_M, metavar="M",
+                    help="start altitude AGL (default the probe mission's start height)")
+    pr.add_argument("--floor", type=ip.ALTITUDE_FLOOR_M, metavar="M",
+                    help="altitude floor AGL (default the probe mission's floor)")
     pr.add_argument("--speed-step", type=ip.SPEED_STEP_MPS, default=0.1, metavar="MPS", help="speed grid step (0.1)")
     _common(pr, kind="probe", constraint=False)
     pr.set_defaults(func=cmd_probe)
@@ -370,7 +384,8 @@ def cmd_vertical(args: argparse.Namespace) -> int:
 
     profile = load_profile(args.vehicle)
     out_stem = _out_path(args, f"vertical-{profile.name}-{args.height:g}m")
-    plan = plan_vertical(profile, args.height, args.w_allow, args.margin, args.accel_fraction)
+    margin = (profile.vrs.margin_mps if args.margin is None else args.margin) + args.extra_margin
+    plan = plan_vertical(profile, args.height, args.w_allow, margin, args.accel_fraction)
     traj = vertical_trajectory(plan, profile.name, profile.mass_kg)
     traj.validate(profile, where="planned trajectory")
     out = _save(traj, args, out_stem)
@@ -407,10 +422,13 @@ def cmd_probe(args: argparse.Namespace) -> int:
 
     profile = load_profile(args.vehicle)
     out_stem = _out_path(args, f"probe-{profile.name}")
-    plan = plan_probe(args.amplitude, args.omega0, args.ramp, args.max_descent_speed, args.duration,
-                      args.start_alt, args.floor, args.speed_step,
-                      max_accel_down_mps2=PROBE_ACCEL_FRACTION * profile.max_accel_down_mps2,
-                      max_accel_up_mps2=PROBE_ACCEL_FRACTION * profile.max_accel_up_mps2)  # fmt: skip
+    fl = load_mission_config(mission_config_path("probe")).flight
+    top = args.max_descent_speed if args.max_descent_speed is not None else PROBE.top_speed_mps(profile.w_allow_mps)
+    start = args.start_alt if args.start_alt is not None else fl.start_height_m
+    floor = args.floor if args.floor is not None else fl.min_alt_m
+    plan = plan_probe(args.amplitude, args.omega0, args.ramp, top, args.duration, start, floor, args.speed_step,
+                      max_accel_down_mps2=PROBE.accel_fraction * profile.max_accel_down_mps2,
+                      max_accel_up_mps2=PROBE.accel_fraction * profile.max_accel_up_mps2)  # fmt: skip
     traj = probe_trajectory(plan, profile.name, profile.mass_kg)
     traj.validate(profile, where="planned trajectory")
     out = _save(traj, args, out_stem)
