@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 
-from flighttest import aero
-from flighttest.profiles import load_profile
+from flighttest.model import aero
+from flighttest.model.profiles import load_profile
 
 
 def main() -> None:

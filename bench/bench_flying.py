@@ -40,9 +40,9 @@ import tomli_w
 from pymavlink import mavutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from flighttest.model.profiles import load_profile
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
-from flighttest.profiles import load_profile
 from sitl_fakes.launcher import FakeVehicle
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -27,15 +27,15 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from flighttest import guard as gd  # noqa: E402
 from flighttest.analysis.descent_time import DescentTimer  # noqa: E402
-from flighttest.feedforward import CatchUpLimit, Feedforward, for_autopilot  # noqa: E402
-from flighttest.mission_scripts import MISSIONS_DIR  # noqa: E402
-from flighttest.missions_config import FlightConfig, load_mission_config  # noqa: E402
+from flighttest.flying import guard as gd  # noqa: E402
+from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopilot  # noqa: E402
+from flighttest.flying.mission_scripts import MISSIONS_DIR  # noqa: E402
+from flighttest.flying.missions_config import FlightConfig, load_mission_config  # noqa: E402
+from flighttest.model.profiles import load_profile  # noqa: E402
 from flighttest.planner.export import helix_trajectory  # noqa: E402
 from flighttest.planner.helix import solve_helix  # noqa: E402
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight  # noqa: E402
-from flighttest.profiles import load_profile  # noqa: E402
 from sitl_fakes.estimator import EstimateError  # noqa: E402
 from sitl_fakes.physics import RigidBodyState  # noqa: E402
 from sitl_fakes.replay import SetpointStream, px4_params, replay  # noqa: E402
@@ -76,7 +76,7 @@ def fake_rows(vehicle: str, seeds: int) -> list[dict]:
     )  # fmt: skip
     plan_s = time.perf_counter() - t0
     ff = Feedforward(FlightConfig().feedforward_lead_s, prof.drag_n_per_mps / prof.mass_kg)
-    # as the mission streams it (flighttest.streamer): down setpoints within the catch-up limit
+    # as the mission streams it (flighttest.flying.streamer): down setpoints within the catch-up limit
     fl = cfg.flight
     catch_up = CatchUpLimit(fl.catch_up_excess_mps, fl.catch_up_floor_mps, px4_params()["MPC_Z_P"])
     sent = for_autopilot(plan, ff).resample(50.0).df

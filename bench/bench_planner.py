@@ -27,11 +27,11 @@ import time
 
 import numpy as np
 
+from flighttest.model.profiles import load_profile
 from flighttest.planner.cases import TABLE_II, detected_classes
 from flighttest.planner.helix import problem_for_vehicle, solve_helix
 from flighttest.planner.planar import PlanarProblem, clear_ocp_cache, solve_planar
 from flighttest.planner.vertical import plan_vertical
-from flighttest.profiles import load_profile
 
 
 def _one_case(n: int) -> None:

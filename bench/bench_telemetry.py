@@ -4,7 +4,7 @@
 
 **1. Inter-arrival times on real PX4** (``PX4_SIH_DIR``, default ``../shared/px4_sih``: the six
 reference flights of flighttest against PX4 SITL with SIH). A ``.tlog`` record's timestamp is when
-flighttest's ``.tlog`` recorder thread received the message (``flighttest/tlog.py``), in the flying
+flighttest's ``.tlog`` recorder thread received the message (``flighttest/flying/tlog_recorder.py``), in the flying
 process. Per stream — position-velocity (``LOCAL_POSITION_NED``, what MAVSDK's
 ``position_velocity_ned`` is made of; ``ODOMETRY``), attitude (``ATTITUDE_QUATERNION``), and "state
 (any)", the two merged, which is what the guard's staleness judges — and per flight phase (from the
@@ -13,14 +13,14 @@ Land, which counts as "land"), the gaps' p50 / p99 / p99.9 / max. Beside them th
 position-velocity samples as flighttest's event loop handled them (``guard.csv``, one row per
 sample, stamped on the loop), and how much later the loop handled each than the recorder received it.
 Then every flight's telemetry is replayed through the guard's stale rule, the old one (3 periods,
-60 ms) and the current one (``flighttest.guard``: phase-aware), in virtual time at the mission's
+60 ms) and the current one (``flighttest.flying.guard``: phase-aware), in virtual time at the mission's
 ticker period: how many times each would have aborted. (A gap counts in the phase in which the
 link went quiet.)
 
 **2. The flying process's own worst pause** (each mode in a fresh subprocess, ``--seconds`` of
 flying): the runner's objects as ``flighttest fly helix`` builds them (the helix plan, the
 profile, the mission config, MAVSDK, CasADi and the planner imported; the ``MissionRunner`` with its
-guard, ``FlightLog`` and ``SetpointStreamer``; the real ``VehicleLink`` subscription code fed by a
+guard, ``FlightLogWriter`` and ``SetpointStreamer``; the real ``VehicleLink`` subscription code fed by a
 thread that hands MAVSDK's own telemetry objects to the loop at 50 Hz per stream as MAVSDK's
 callbacks do; the ``.tlog`` recorder thread receiving the reference flights' message mix over UDP;
 a parameter snapshot of 1 000 parameters as at preflight), flying the phases of a mission: takeoff
@@ -28,7 +28,7 @@ a parameter snapshot of 1 000 parameters as at preflight), flying the phases of 
 the streamer's setpoints (its 50 Hz deadline-paced ticker) and of a 50 Hz probe ticker, each
 garbage collection (``gc.callbacks``: generation, duration), and the time of each flight-log
 write on the loop. Modes: ``gc`` — the collector as CPython runs it; ``mitigated`` — the
-runner's ``flighttest.pauses.FlightCollector`` (freeze, no automatic runs, collections at the
+runner's ``flighttest.flying.pauses.FlightCollector`` (freeze, no automatic runs, collections at the
 settles' safe points); and ``gc+full`` / ``mitigated+full``: the same with one full collection
 forced mid-stream, the pause CPython's own full collection costs whenever it comes. Then each
 flight-log write alone, 3 000 times, against the same formatting into memory (no I/O) as a control.
@@ -154,9 +154,9 @@ def stats_ms(gaps_ms: np.ndarray) -> dict[str, float]:
 def replay_stale(t_state: np.ndarray, t_posvel: np.ndarray, spans, rule: str) -> list[tuple[float, str, str]]:
     """Replay sample arrivals through the stale rule in virtual time, a tick every ``TICK_S``: the
     aborts it would have ordered, (UNIX time, phase label, reason). ``rule`` "old": 60 ms in every
-    phase the guard was armed in (arm … settle after the stream); "new": ``flighttest.guard``'s."""
-    from flighttest import guard as gd
-    from flighttest.profiles import load_profile
+    phase the guard was armed in (arm … settle after the stream); "new": ``flighttest.flying.guard``'s."""
+    from flighttest.flying import guard as gd
+    from flighttest.model.profiles import load_profile
 
     region = load_profile("x500").guard_region()
     if rule == "old":
@@ -259,7 +259,7 @@ def print_reference(r: dict) -> None:
     print("\nLongest state (any) gaps: " + "; ".join(f"{n} {g:.0f} ms ({lab}, t={t:.1f} s)"
                                                      for n, g, lab, t in r["worst_state_gaps"]))  # fmt: skip
     print("\nStale rule replayed (virtual time, 20 ms ticks): aborts it would have ordered\n")
-    print("| flight | old: 60 ms everywhere | new: flighttest.guard |")
+    print("| flight | old: 60 ms everywhere | new: flighttest.flying.guard |")
     print("|---|---|---|")
     for name, rep in r["replays"].items():
         old = "; ".join(f"{lab} {why}" for _, lab, why in rep["old"]) or "none"
@@ -399,18 +399,18 @@ async def _fly_phases(traj_path: Path, seconds: float, mode: str, tmp: Path) -> 
     from flighttest.analysis.params import snapshot
     from flighttest.cli import build_parser
     from flighttest.cli.fly import build_request
-    from flighttest.flightlog import FlightLog
-    from flighttest.link import VehicleLink
-    from flighttest.mission import MissionRunner
-    from flighttest.pauses import FlightCollector
-    from flighttest.streamer import Setpoint, SetpointStreamer
-    from flighttest.tlog import TlogRecorder
+    from flighttest.flying.link import VehicleLink
+    from flighttest.flying.log_writer import FlightLogWriter
+    from flighttest.flying.pauses import FlightCollector
+    from flighttest.flying.runner import MissionRunner
+    from flighttest.flying.streamer import Setpoint, SetpointStreamer
+    from flighttest.flying.tlog_recorder import TlogRecorder
 
     args = build_parser().parse_args(["fly", str(traj_path), "--connect", "udpout://127.0.0.1:14580", "--vehicle",
                                       "x500", "--yes", "--log-dir", str(tmp / "logs")])  # fmt: skip
     req = build_request(args)
     runner = MissionRunner(req)
-    runner.log = log = FlightLog(tmp / "logs", "bench")
+    runner.log = log = FlightLogWriter(tmp / "logs", "bench")
     params = {f"PARAM_{i:04d}": float(i) for i in range(1000)}
     recorder = TlogRecorder(tmp / "bench.tlog").start()
     link = VehicleLink("udpout://127.0.0.1:14580", telemetry_hz=50.0)
@@ -522,9 +522,9 @@ def child(args: argparse.Namespace) -> None:
 
 
 def pauses(seconds: float, modes: list[str]) -> list[dict]:
-    from flighttest.mission_scripts import load_mission_module
-    from flighttest.missions_config import load_mission_config
-    from flighttest.profiles import load_profile
+    from flighttest.flying.mission_scripts import load_mission_module
+    from flighttest.flying.missions_config import load_mission_config
+    from flighttest.model.profiles import load_profile
 
     out = []
     with tempfile.TemporaryDirectory(prefix="bench-telemetry-plan-") as tmp:
@@ -577,12 +577,12 @@ def print_pauses(rows: list[dict]) -> None:
 
 def log_writes(n: int = 3000) -> dict:
     """The flight log's writes alone (no threads, no loop): are they slow, or is the machine? Each
-    ``FlightLog`` write ``n`` times, and the same CSV formatting into memory as a control (no I/O)."""
+    ``FlightLogWriter`` write ``n`` times, and the same CSV formatting into memory as a control (no I/O)."""
     import csv
     import io
 
-    from flighttest.flightlog import FlightLog, csv_number
-    from flighttest.guard import Decision, GuardSample
+    from flighttest.flying.guard import Decision, GuardSample
+    from flighttest.flying.log_writer import FlightLogWriter, csv_number
 
     def run(fn) -> dict[str, float]:
         ts = []
@@ -596,7 +596,7 @@ def log_writes(n: int = 3000) -> dict:
 
     out = {}
     with tempfile.TemporaryDirectory(prefix="bench-telemetry-log-") as tmp:
-        log = FlightLog(tmp, "bench")
+        log = FlightLogWriter(tmp, "bench")
         s = GuardSample(1.0, 0.1, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0, 5.0)
         dec = Decision(1.0, "ok", "none", "", 0.1, 0.2, 0.3, 0.4, s)
         out["guard row"] = run(lambda: log.guard(dec))
@@ -637,7 +637,7 @@ def cb(phase, info):
 gc.callbacks.append(cb)
 mode, out, argv = sys.argv[1], sys.argv[2], sys.argv[3:]
 if mode == "gc":  # the collector as CPython runs it: the runner's FlightCollector changes nothing
-    import flighttest.pauses as p
+    import flighttest.flying.pauses as p
     init = p.FlightCollector.__init__
     p.FlightCollector.__init__ = lambda self, enabled=True, young_limit=p.YOUNG_LIMIT: init(self, False, young_limit)
 atexit.register(lambda: json.dump(rec, open(out, "w")))

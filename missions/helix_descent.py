@@ -13,13 +13,13 @@ few seconds of IPOPT.
 from pathlib import Path
 
 from flighttest.errors import FlighttestError
-from flighttest.missions_config import MissionConfig
-from flighttest.plan_config import HelixPlanConfig
+from flighttest.flying.missions_config import MissionConfig
+from flighttest.flying.plan_config import HelixPlanConfig
+from flighttest.model.profiles import VehicleProfile
+from flighttest.model.trajectory import Trajectory
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.helix import solve_helix
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
-from flighttest.profiles import VehicleProfile
-from flighttest.trajectory import Trajectory
 
 CONFIG = Path(__file__).with_suffix(".toml")
 

@@ -9,12 +9,12 @@ braking within the vehicle's limits. Edit ``vertical_descent.toml`` or copy this
 
 from pathlib import Path
 
-from flighttest.missions_config import MissionConfig
-from flighttest.plan_config import VerticalPlanConfig
+from flighttest.flying.missions_config import MissionConfig
+from flighttest.flying.plan_config import VerticalPlanConfig
+from flighttest.model.profiles import VehicleProfile
+from flighttest.model.trajectory import Trajectory
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
-from flighttest.profiles import VehicleProfile
-from flighttest.trajectory import Trajectory
 
 CONFIG = Path(__file__).with_suffix(".toml")
 

@@ -1,5 +1,5 @@
 """VRS probe: a sine sweep ``Z(t) = Z0 + A sin(ω0 t²)`` whose descent speed grows slowly, to find the
-vehicle's real VRS onset (paper §IV, NOTES §3).
+vehicle's real VRS onset (paper §IV, CONVENTIONS §3).
 
 The sweep ramps in, then each cycle descends a little faster, up to a top speed beyond the onset it
 looks for (``max_descent_ratio`` × the profile's ``w_allow`` unless ``max_descent_mps`` or
@@ -16,12 +16,12 @@ Then ``flighttest identify LOG --vehicle NAME`` finds the onset in the log.
 from pathlib import Path
 
 from flighttest.errors import FlighttestError
-from flighttest.missions_config import MissionConfig
-from flighttest.plan_config import ProbePlanConfig
+from flighttest.flying.missions_config import MissionConfig
+from flighttest.flying.plan_config import ProbePlanConfig
+from flighttest.model.profiles import VehicleProfile
+from flighttest.model.trajectory import Trajectory
 from flighttest.planner.export import probe_trajectory
 from flighttest.planner.probe import plan_probe
-from flighttest.profiles import VehicleProfile
-from flighttest.trajectory import Trajectory
 
 CONFIG = Path(__file__).with_suffix(".toml")
 

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from flighttest.errors import FlighttestError
-from flighttest.profiles import load_profile
+from flighttest.model.profiles import load_profile
 from sitl_fakes import px4
 from sitl_fakes.disturbance import VrsTruth, default_onset_mps
 from sitl_fakes.estimator import EstimateError

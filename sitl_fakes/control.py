@@ -30,8 +30,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from flighttest.aero import G_MPS2
-from flighttest.profiles import VehicleProfile
+from flighttest.model.aero import G_MPS2
+from flighttest.model.profiles import VehicleProfile
 from sitl_fakes.physics import RigidBodyState, rotate_ned_to_body
 
 NAN = float("nan")

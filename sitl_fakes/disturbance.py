@@ -1,7 +1,7 @@
 """The fake's VRS/WBS truth: where rotor thrust drops and fluctuates, and by how much.
 
-Geometry comes from ``flighttest.frames`` (air-relative blade-frame velocity ``w``, ``u``) and region
-labels from ``flighttest.aero``; the *truth parameters* come from the command line and are independent
+Geometry comes from ``flighttest.model.frames`` (air-relative blade-frame velocity ``w``, ``u``) and region
+labels from ``flighttest.model.aero``; the *truth parameters* come from the command line and are independent
 of what flighttest believes about the vehicle:
 
 - ``onset_mps``: straight-down descent rate ``w`` (m/s, through the disk) at which the disturbance
@@ -34,8 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flighttest import aero
-from flighttest.frames import blade_velocity_mps
+from flighttest.model import aero
 
 CORRELATION_TIME_S = 0.1
 SHARED_FRACTION = 0.5
@@ -59,6 +58,24 @@ class VrsTruth:
             raise ValueError(f"cone must lie in (0, 90) degrees (got {self.cone_deg})")
         if not (math.isfinite(self.severity) and self.severity >= 0):
             raise ValueError(f"severity must be ≥ 0 (got {self.severity})")
+
+
+def blade_velocity_mps(vn, ve, vd, qw, qx, qy, qz, wn=0.0, we=0.0, wd=0.0) -> tuple[float, float]:
+    """The air's velocity through the rotor disk, in the body frame: ``w`` (m/s, > 0 when the air
+    flows up through the disk, i.e. the vehicle sinks into it) and ``u`` (in the disk's plane).
+
+    The quaternion (w, x, y, z) turns body FRD into NED; its conjugate turns the air-relative NED
+    velocity into the body: ``v' = v + 2 r × (r × v + w v)`` with ``r`` the conjugate's vector part.
+    """
+    ax, ay, az = vn - wn, ve - we, vd - wd
+    rx, ry, rz = -qx, -qy, -qz
+    cx = ry * az - rz * ay + qw * ax
+    cy = rz * ax - rx * az + qw * ay
+    cz = rx * ay - ry * ax + qw * az
+    bx = ax + 2.0 * (ry * cz - rz * cy)
+    by = ay + 2.0 * (rz * cx - rx * cz)
+    bz = az + 2.0 * (rx * cy - ry * cx)
+    return bz, math.hypot(bx, by)
 
 
 def default_onset_mps(v_h_mps: float) -> float:

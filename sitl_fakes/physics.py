@@ -2,7 +2,7 @@
 ground contact.
 
 Plain-float arithmetic on purpose: at 250 Hz a 3-vector through numpy costs more than the maths.
-Frames as in NOTES §1: NED inertial, FRD body, ``q = (w, x, y, z)`` rotates body → NED.
+Frames as in CONVENTIONS §1: NED inertial, FRD body, ``q = (w, x, y, z)`` rotates body → NED.
 Rotor order and spin follow PX4's quad-X: 1 front-right CCW, 2 rear-left CCW, 3 front-left CW,
 4 rear-right CW. A CCW rotor's drag torque yaws the body clockwise (+yaw in FRD).
 """
@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from flighttest.aero import G_MPS2
-from flighttest.profiles import VehicleProfile
+from flighttest.model.aero import G_MPS2
+from flighttest.model.profiles import VehicleProfile
 
 # PX4 SIH's defaults (../shared/px4_sih): motor time constant SIH_T_TAU and rotational damping SIH_KDW
 # (N m per rad/s). Linear drag (SIH_KDV, N per m/s of air-relative velocity) is the profile's

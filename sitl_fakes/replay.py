@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flighttest.aero import G_MPS2
-from flighttest.profiles import VehicleProfile
+from flighttest.model.aero import G_MPS2
+from flighttest.model.profiles import VehicleProfile
 from sitl_fakes import px4
 from sitl_fakes.control import NAN, Controller, Limits, Target
 from sitl_fakes.estimator import EstimateError, Estimator

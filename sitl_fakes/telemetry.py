@@ -15,7 +15,7 @@ import math
 import random
 import time
 
-from flighttest.aero import G_MPS2
+from flighttest.model.aero import G_MPS2
 from sitl_fakes.link import mavlink
 from sitl_fakes.physics import rotate_ned_to_body
 from sitl_fakes.px4 import Mode

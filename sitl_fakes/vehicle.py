@@ -10,8 +10,8 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from flighttest.aero import G_MPS2
-from flighttest.profiles import VehicleProfile
+from flighttest.model.aero import G_MPS2
+from flighttest.model.profiles import VehicleProfile
 from sitl_fakes import px4
 from sitl_fakes.control import NAN, Controller, Limits, Target, finite
 from sitl_fakes.disturbance import Disturbance, VrsTruth

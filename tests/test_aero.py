@@ -1,4 +1,4 @@
-"""Known values of the aerodynamic model (paper §II-III, NOTES §2)."""
+"""Known values of the aerodynamic model (paper §II-III, CONVENTIONS §2)."""
 
 import math
 
@@ -7,11 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flighttest import aero
+from flighttest.model import aero
 
 
 def test_hover_induced_velocity_formula():
-    # Mambo: 63 g on 4 rotors of 6.5 cm; NOTES: check the paper's 1.54 m/s against its own formula.
+    # Mambo: 63 g on 4 rotors of 6.5 cm; CONVENTIONS §1: check the paper's 1.54 m/s against its own formula.
     t = 0.063 * aero.G_MPS2 / 4
     a = math.pi * 0.0325**2
     v_h = float(aero.hover_induced_velocity_mps(t, 1.225, a))

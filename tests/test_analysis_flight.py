@@ -16,7 +16,7 @@ from flighttest.analysis.compare import primary_descent
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
 from flighttest.analysis.segment import find_descents
-from flighttest.profiles import load_profile
+from flighttest.model.profiles import load_profile
 
 pytestmark = pytest.mark.flight
 

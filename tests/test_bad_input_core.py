@@ -21,16 +21,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from flighttest import inputs as ip
-from flighttest import preflight as pf
 from flighttest.campaign.state import CampaignState
 from flighttest.cli import main
 from flighttest.errors import FlighttestError
-from flighttest.missions_config import load_mission_config, mission_config_from_dict
+from flighttest.flying import preflight as pf
+from flighttest.flying.missions_config import load_mission_config, mission_config_from_dict
+from flighttest.model.profiles import SHIPPED_DIR, load_profile, profile_from_dict
+from flighttest.model.trajectory import FORMAT, MAX_ROWS, Trajectory
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
-from flighttest.profiles import SHIPPED_DIR, load_profile, profile_from_dict
 from flighttest.tomlfile import read_toml
-from flighttest.trajectory import FORMAT, MAX_ROWS, Trajectory
 
 X500_TOML = (SHIPPED_DIR / "x500.toml").read_text(encoding="utf-8")
 VERTICAL_TOML = (Path(__file__).parents[1] / "missions" / "vertical_descent.toml").read_text(encoding="utf-8")

@@ -19,7 +19,7 @@ import pytest
 import tomli_w
 
 from flighttest.cli import main
-from flighttest.mission_scripts import MISSIONS, MISSIONS_DIR
+from flighttest.flying.mission_scripts import MISSIONS, MISSIONS_DIR
 
 GOOD_URL = "udpout://127.0.0.1:9"  # valid, never reached: every row is refused before it connects
 
@@ -121,8 +121,8 @@ def _imported():
     """Import what the commands import once, outside the timed runs (the time limits are for the
     checks, not for loading the planners' libraries)."""
     from flighttest.cli import build_parser
-    from flighttest.mission import fly  # noqa: F401
-    from flighttest.mission_scripts import load_mission_module
+    from flighttest.flying.mission_scripts import load_mission_module
+    from flighttest.flying.runner import fly  # noqa: F401
 
     build_parser()
     load_mission_module("vertical")
@@ -256,10 +256,10 @@ def test_a_device_mavsdk_cannot_open_is_one_line_with_mavsdk_s_reason(sandbox, c
 
 
 def test_the_mission_runner_refuses_an_endless_trajectory_before_resampling_it(tmp_path):
-    from flighttest.mission import FlyRequest, MissionRunner
-    from flighttest.missions_config import MissionConfig
-    from flighttest.profiles import load_profile
-    from flighttest.trajectory import REQUIRED_COLUMNS, Trajectory
+    from flighttest.flying.missions_config import MissionConfig
+    from flighttest.flying.runner import FlyRequest, MissionRunner
+    from flighttest.model.profiles import load_profile
+    from flighttest.model.trajectory import REQUIRED_COLUMNS, Trajectory
 
     # built around the loader (which refuses it too): whatever reaches fly(), the runner must not crash
     df = pd.DataFrame({c: [0.0, 0.0] for c in REQUIRED_COLUMNS})
@@ -274,7 +274,7 @@ def test_the_mission_runner_refuses_an_endless_trajectory_before_resampling_it(t
 
 
 def test_check_url_keeps_every_documented_url():
-    from flighttest.link import check_url
+    from flighttest.flying.link import check_url
 
     for url in ("udpin://0.0.0.0:14540", "udpin://127.0.0.1:14540", "udpout://127.0.0.1:14580",
                 "udpout://localhost:14580", "tcpout://192.168.1.10:5760", "tcpin://0.0.0.0:5760",

@@ -26,8 +26,8 @@ from flighttest.campaign import steps as campaign_steps
 from flighttest.campaign.state import STEPS, CampaignState
 from flighttest.campaign.summary import read_summary
 from flighttest.cli import main
-from flighttest.mission_scripts import load_mission_module
-from flighttest.profiles import load_profile
+from flighttest.flying.mission_scripts import load_mission_module
+from flighttest.model.profiles import load_profile
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 SIH_PROBE = SHARED / "px4_sih" / "probe-full-sweep"

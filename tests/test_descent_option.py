@@ -11,7 +11,7 @@ import pytest
 
 from flighttest.cli import build_parser, main
 from flighttest.cli.fly import build_request
-from flighttest.mission_scripts import mission_config_path
+from flighttest.flying.mission_scripts import mission_config_path
 
 URL = "udpin://0.0.0.0:14540"
 
@@ -78,9 +78,9 @@ def test_a_descent_without_room_is_refused(cli, argv, needle):
 
 
 def test_descent_is_refused_for_a_trajectory_file(cli, tmp_path):
+    from flighttest.model.profiles import load_profile
     from flighttest.planner.export import vertical_trajectory
     from flighttest.planner.vertical import plan_vertical
-    from flighttest.profiles import load_profile
 
     prof = load_profile("x500")
     path = tmp_path / "down"

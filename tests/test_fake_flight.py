@@ -27,7 +27,7 @@ from mavsdk.asyncio.plugins.param import ParamAsync, ParamError
 from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 from pymavlink import mavutil
 
-from flighttest.profiles import load_profile
+from flighttest.model.profiles import load_profile
 from sitl_fakes.disturbance import default_onset_mps
 
 pytestmark = pytest.mark.flight

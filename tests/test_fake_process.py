@@ -14,8 +14,8 @@ import time
 import pandas as pd
 import pytest
 
-from flighttest.aero import G_MPS2
-from flighttest.profiles import load_profile
+from flighttest.model.aero import G_MPS2
+from flighttest.model.profiles import load_profile
 from sitl_fakes.control import NAN, Target
 from sitl_fakes.disturbance import Disturbance, VrsTruth, default_onset_mps
 from sitl_fakes.estimator import EstimateError

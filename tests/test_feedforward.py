@@ -1,4 +1,4 @@
-"""The feed-forward flighttest sends PX4 (flighttest.feedforward), pure, and what PX4's cascade makes of it."""
+"""The feed-forward flighttest sends PX4 (flighttest.flying.feedforward), pure, and what PX4's cascade makes of it."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from flighttest.aero import G_MPS2
-from flighttest.feedforward import CatchUpLimit, Feedforward, feedforward_accel_ned, z_position_gain_per_s
-from flighttest.profiles import load_profile
+from flighttest.flying.feedforward import CatchUpLimit, Feedforward, feedforward_accel_ned, z_position_gain_per_s
+from flighttest.model.aero import G_MPS2
+from flighttest.model.profiles import load_profile
 from sitl_fakes.control import Controller, Limits, Target
 from sitl_fakes.physics import RigidBodyState
 

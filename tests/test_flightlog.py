@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 
 from flighttest.errors import FlighttestError
-from flighttest.flightlog import GUARD_COLUMNS, SETPOINT_COLUMNS, FlightLog
-from flighttest.guard import OK, Decision, GuardSample
+from flighttest.flying.guard import OK, Decision, GuardSample
+from flighttest.flying.log_writer import GUARD_COLUMNS, SETPOINT_COLUMNS, FlightLogWriter
 
 
 def _rows(path: Path) -> list[str]:
@@ -25,7 +25,7 @@ def _rows(path: Path) -> list[str]:
 
 
 def test_folder_layout_and_rows_reach_the_disk_as_they_are_written(tmp_path):
-    log = FlightLog(tmp_path, "helix descent/1", t0_mono=100.0)
+    log = FlightLogWriter(tmp_path, "helix descent/1", t0_mono=100.0)
     assert log.dir.parent == tmp_path and log.dir.name.endswith("-helix_descent_1")
     assert _rows(log.dir / "setpoints.csv") == [",".join(SETPOINT_COLUMNS)]
     assert _rows(log.dir / "guard.csv") == [",".join(GUARD_COLUMNS)]
@@ -50,7 +50,7 @@ def test_folder_layout_and_rows_reach_the_disk_as_they_are_written(tmp_path):
 
 
 def test_non_finite_values_are_empty_cells_and_stale_decisions_log_without_a_sample(tmp_path):
-    log = FlightLog(tmp_path, "m", t0_mono=0.0)
+    log = FlightLogWriter(tmp_path, "m", t0_mono=0.0)
     log.guard(Decision(1.0, "stale", "abort", "no telemetry for 70 ms (> 60 ms)"))
     log.setpoint(1.0, "p", math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     log.close()
@@ -62,7 +62,7 @@ def test_non_finite_values_are_empty_cells_and_stale_decisions_log_without_a_sam
 
 
 def test_two_flights_in_the_same_second_get_two_folders(tmp_path):
-    a, b = FlightLog(tmp_path, "m"), FlightLog(tmp_path, "m")
+    a, b = FlightLogWriter(tmp_path, "m"), FlightLogWriter(tmp_path, "m")
     assert a.dir != b.dir and a.dir.is_dir() and b.dir.is_dir()
     a.close()
     b.close()
@@ -72,15 +72,15 @@ def test_an_unwritable_log_root_is_one_error_line(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
     with pytest.raises(FlighttestError, match="cannot create log folder"):
-        FlightLog(blocker / "logs", "m")
+        FlightLogWriter(blocker / "logs", "m")
 
 
 WRITER = textwrap.dedent(
     """
     import sys, time
-    from flighttest.flightlog import FlightLog
-    from flighttest.guard import Decision, GuardSample
-    log = FlightLog(sys.argv[1], "killed", t0_mono=time.monotonic())
+    from flighttest.flying.log_writer import FlightLogWriter
+    from flighttest.flying.guard import Decision, GuardSample
+    log = FlightLogWriter(sys.argv[1], "killed", t0_mono=time.monotonic())
     print(log.dir, flush=True)
     k = 0
     while True:
@@ -126,7 +126,7 @@ def test_a_flight_killed_mid_descent_leaves_a_folder_the_analysis_opens(fake_veh
     import tomli_w
 
     from flighttest.analysis.loaders.folder import load_folder
-    from flighttest.mission_scripts import MISSIONS_DIR
+    from flighttest.flying.mission_scripts import MISSIONS_DIR
 
     cfg = tomllib.loads((MISSIONS_DIR / "vertical_descent.toml").read_text())
     cfg["guard"]["stale_periods"] = 15.0  # a busy CI machine; this test is about the log

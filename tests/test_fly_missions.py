@@ -21,12 +21,12 @@ import pandas as pd
 import pytest
 import tomli_w
 
-from flighttest.frames import GuardRegion
-from flighttest.mission_scripts import MISSIONS, MISSIONS_DIR
-from flighttest.missions_config import load_mission_config
+from flighttest.flying.mission_scripts import MISSIONS, MISSIONS_DIR
+from flighttest.flying.missions_config import load_mission_config
+from flighttest.model.frames import GuardRegion
+from flighttest.model.profiles import load_profile
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
-from flighttest.profiles import load_profile
 
 pytestmark = pytest.mark.flight
 

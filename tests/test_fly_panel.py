@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 import tomli_w
 
-from flighttest.mission_scripts import MISSIONS_DIR
+from flighttest.flying.mission_scripts import MISSIONS_DIR
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
 

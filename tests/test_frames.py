@@ -1,4 +1,4 @@
-"""The blade-frame test the guard uses: known states and properties (NOTES §1-2)."""
+"""The blade-frame test the guard uses: known states and properties (CONVENTIONS §1-2)."""
 
 import math
 
@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flighttest import frames
-from flighttest.frames import GuardRegion
+from flighttest.model import frames
+from flighttest.model.frames import GuardRegion
 
 REGION = GuardRegion(w_allow_mps=0.8, v_h_mps=6.0, cone_deg=20.0, margin_mps=0.0)
 LEVEL = (1.0, 0.0, 0.0, 0.0)

@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from flighttest import guard as g
-from flighttest.frames import GuardRegion, quat_from_euler, quat_to_rotmat
-from flighttest.profiles import load_profile
+from flighttest.flying import guard as g
+from flighttest.model.frames import GuardRegion, quat_from_euler, quat_to_rotmat
+from flighttest.model.profiles import load_profile
 
 REGION = GuardRegion(w_allow_mps=0.8, v_h_mps=6.0, cone_deg=20.0, margin_mps=0.1)
 LEVEL = (1.0, 0.0, 0.0, 0.0)

@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 
-from flighttest import guard as g
-from flighttest.aero import G_MPS2
-from flighttest.frames import quat_from_euler
-from flighttest.profiles import load_profile
+from flighttest.flying import guard as g
+from flighttest.model.aero import G_MPS2
+from flighttest.model.frames import quat_from_euler
+from flighttest.model.profiles import load_profile
 
 X500 = load_profile("x500")
 

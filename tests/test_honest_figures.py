@@ -20,7 +20,7 @@ from flighttest.analysis import descent_time as dt
 from flighttest.analysis.compare import compare_row, flown_descent, primary_descent
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
-from flighttest.profiles import load_profile
+from flighttest.model.profiles import load_profile
 
 PX4_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "px4_sih"
 needs_px4 = pytest.mark.skipif(not (PX4_DIR / "vertical-3m-completed").is_dir(), reason="no PX4 reference flights")
@@ -188,17 +188,17 @@ def test_ladder_phases_are_never_the_main_descent():
 
 
 def _runner(tmp_path):
-    from flighttest.flightlog import FlightLog
-    from flighttest.link import TelemetryState
-    from flighttest.mission import FlyRequest, MissionRunner
-    from flighttest.mission_scripts import load_mission_module, mission_config_path
-    from flighttest.missions_config import load_mission_config
+    from flighttest.flying.link import TelemetryState
+    from flighttest.flying.log_writer import FlightLogWriter
+    from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
+    from flighttest.flying.missions_config import load_mission_config
+    from flighttest.flying.runner import FlyRequest, MissionRunner
 
     prof = load_profile("x500")
     cfg = load_mission_config(mission_config_path("vertical"))
     traj = load_mission_module("vertical").plan(prof, cfg)
     runner = MissionRunner(FlyRequest("udpin://0.0.0.0:14540", prof, cfg, traj, "vertical", log_root=tmp_path))
-    runner.log = FlightLog(tmp_path, "vertical")
+    runner.log = FlightLogWriter(tmp_path, "vertical")
     runner.link = SimpleNamespace(state=TelemetryState(q=(1.0, 0.0, 0.0, 0.0), armed=True, flight_mode="OFFBOARD"))
     return runner
 
@@ -238,7 +238,7 @@ def test_the_ladder_labels_its_phases_once_per_rung(tmp_path):
 
 
 def test_final_mode_is_the_mode_at_disarm(tmp_path):
-    from flighttest.mission import MODE_SETTLE_S, final_mode
+    from flighttest.flying.runner import MODE_SETTLE_S, final_mode
 
     assert final_mode("OFFBOARD", False, "LAND") == {
         "final_mode": "LAND", "final_mode_note": "at disarm; OFFBOARD reported after disarming"}  # fmt: skip

@@ -33,7 +33,7 @@ from flighttest.analysis.loaders import load_log
 from flighttest.analysis.synthetic import UNIX0, SyntheticFlight, write_tlog
 from flighttest.cli import main
 from flighttest.errors import FlighttestError
-from flighttest.profiles import (
+from flighttest.model.profiles import (
     SHIPPED_DIR,
     load_profile,
     plausible_w_allow_range,

@@ -20,8 +20,8 @@ import pandas as pd
 import pytest
 import tomli_w
 
-from flighttest import guard as g
-from flighttest.mission_scripts import MISSIONS, MISSIONS_DIR
+from flighttest.flying import guard as g
+from flighttest.flying.mission_scripts import MISSIONS, MISSIONS_DIR
 
 
 def ob(t: float, **kw) -> g.LadderObservation:

@@ -8,7 +8,7 @@ import inspect
 from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.plugins.offboard import Offboard
 
-from flighttest.link import OFFBOARD_SETTERS
+from flighttest.flying.link import OFFBOARD_SETTERS
 
 
 def test_offboard_async_wraps_a_synchronous_plugin_with_the_setters_the_streamer_calls():

@@ -8,10 +8,10 @@ import sys
 import pytest
 
 from flighttest.errors import FlighttestError
-from flighttest.mission_scripts import MISSIONS, MISSIONS_DIR
-from flighttest.missions_config import load_mission_config, mission_config_from_dict
+from flighttest.flying.mission_scripts import MISSIONS, MISSIONS_DIR
+from flighttest.flying.missions_config import load_mission_config, mission_config_from_dict
+from flighttest.model.profiles import load_profile
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
-from flighttest.profiles import load_profile
 
 
 @pytest.mark.parametrize("mission", sorted(MISSIONS))
@@ -19,7 +19,7 @@ def test_the_shipped_mission_configs_load(mission):
     cfg = load_mission_config(MISSIONS_DIR / f"{MISSIONS[mission]}.toml")
     assert cfg.mission == mission
     assert cfg.flight.start_height_m > cfg.flight.min_alt_m
-    # the field default (flighttest.guard.STALE_AFTER_S), not the older 3 periods = 60 ms
+    # the field default (flighttest.flying.guard.STALE_AFTER_S), not the older 3 periods = 60 ms
     assert cfg.to_dict()["guard"]["stale_after_s"] == 0.25 and cfg.guard.stale_periods is None
 
 

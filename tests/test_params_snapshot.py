@@ -81,9 +81,9 @@ def test_snapshot_document_full_read_and_fallback():
 
 
 def test_flightlog_writes_params_json(tmp_path):
-    from flighttest.flightlog import FlightLog
+    from flighttest.flying.log_writer import FlightLogWriter
 
-    log = FlightLog(tmp_path, "probe")
+    log = FlightLogWriter(tmp_path, "probe")
     try:
         path = log.write_params(snapshot(PX4, {}, "PX4", log.unix0))
     finally:
@@ -95,7 +95,7 @@ def test_flightlog_writes_params_json(tmp_path):
 
 def test_link_reads_all_params_from_the_fake(fake_vehicle_factory):
     """What the preflight does, against the fake's PARAM_REQUEST_LIST answer (connects, does not fly)."""
-    from flighttest.link import VehicleLink
+    from flighttest.flying.link import VehicleLink
 
     fake = fake_vehicle_factory("x500")
 

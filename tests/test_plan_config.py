@@ -1,4 +1,4 @@
-"""Each mission's [plan] defaults live in one place (flighttest.plan_config): the shipped TOMLs agree
+"""Each mission's [plan] defaults live in one place (flighttest.flying.plan_config): the shipped TOMLs agree
 with them, the mission scripts use them, and `flighttest plan probe|vertical` plans what `fly` flies."""
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from flighttest.errors import FlighttestError
-from flighttest.mission_scripts import load_mission_module, mission_config_path
-from flighttest.missions_config import load_mission_config
-from flighttest.plan_config import HelixPlanConfig, ProbePlanConfig, VerticalPlanConfig
+from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
+from flighttest.flying.missions_config import load_mission_config
+from flighttest.flying.plan_config import HelixPlanConfig, ProbePlanConfig, VerticalPlanConfig
+from flighttest.model.profiles import load_profile
+from flighttest.model.trajectory import Trajectory
 from flighttest.planner.tracking import TrackingMargin
-from flighttest.profiles import load_profile
-from flighttest.trajectory import Trajectory
 
 CONFIGS = {"probe": ProbePlanConfig, "vertical": VerticalPlanConfig, "helix": HelixPlanConfig}
 

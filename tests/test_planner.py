@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 from flighttest.errors import FlighttestError
+from flighttest.model.profiles import load_profile
+from flighttest.model.trajectory import Trajectory
 from flighttest.planner.cases import TABLE_II, detected_classes
 from flighttest.planner.cone import VelocityConstraint, planar_blade_velocity
 from flighttest.planner.helix import problem_for_vehicle, solve_helix
 from flighttest.planner.planar import PlanarProblem, classify, solve_planar
 from flighttest.planner.probe import plan_probe
 from flighttest.planner.vertical import plan_vertical
-from flighttest.profiles import load_profile
-from flighttest.trajectory import Trajectory
 
 # Between-node tolerance: the mesh refinement drives the 1 kHz re-simulated violation below 1 mm/s.
 RESIM_TOL_MPS = 2e-3

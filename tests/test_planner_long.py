@@ -12,10 +12,10 @@ import math
 import numpy as np
 import pytest
 
+from flighttest.model.profiles import load_profile
 from flighttest.planner import helix
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.ocp import rk4_piecewise, rk4_resimulate
-from flighttest.profiles import load_profile
 
 INDEPENDENT_T_F_S = 9.99  # 20 m, radius 2 m, x500 (issue 11)
 # The dense re-sampling may pass the radius bound by this much (the check's own tolerance, 1 mm,

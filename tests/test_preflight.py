@@ -6,11 +6,11 @@ import math
 
 import pytest
 
-from flighttest import preflight as pf
-from flighttest.link import TelemetryState
+from flighttest.flying import preflight as pf
+from flighttest.flying.link import TelemetryState
+from flighttest.model.profiles import load_profile
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
-from flighttest.profiles import load_profile
 
 X500 = load_profile("x500")
 REGION = X500.guard_region()

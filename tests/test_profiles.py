@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from flighttest import aero
 from flighttest.errors import FlighttestError
-from flighttest.profiles import list_profiles, load_profile, write_w_allow
+from flighttest.model import aero
+from flighttest.model.profiles import list_profiles, load_profile, write_w_allow
 
 GOOD = """
 name = "test_quad"

@@ -17,15 +17,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from flighttest import guard as gd
-from flighttest.feedforward import CatchUpLimit, Feedforward, for_autopilot
-from flighttest.mission_scripts import MISSIONS_DIR as MISSIONS
-from flighttest.mission_scripts import load_mission_module
-from flighttest.missions_config import FlightConfig, load_mission_config
+from flighttest.flying import guard as gd
+from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopilot
+from flighttest.flying.mission_scripts import MISSIONS_DIR as MISSIONS
+from flighttest.flying.mission_scripts import load_mission_module
+from flighttest.flying.missions_config import FlightConfig, load_mission_config
+from flighttest.model.profiles import load_profile
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.helix import solve_helix
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
-from flighttest.profiles import load_profile
 from sitl_fakes.estimator import EstimateError, Estimator
 from sitl_fakes.physics import RigidBodyState
 from sitl_fakes.replay import SetpointStream, replay

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from flighttest import mission_scripts
 from flighttest.errors import FlighttestError
-from flighttest.mission_scripts import MISSIONS
+from flighttest.flying import mission_scripts
+from flighttest.flying.mission_scripts import MISSIONS
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("pyproject.toml", "README.md", "flighttest", "missions", "sitl_fakes")
@@ -40,8 +40,8 @@ def _source_files(folder: str, pattern: str) -> set[str]:
 # and with an empty home, so neither the checkout nor ~/.config can answer.
 LOOKUP = """
 import json
-from flighttest import mission_scripts as ms
-from flighttest.missions_config import load_mission_config
+from flighttest.flying import mission_scripts as ms
+from flighttest.flying.missions_config import load_mission_config
 out = {}
 for name in ms.MISSIONS:
     module = ms.load_mission_module(name)
@@ -70,7 +70,7 @@ def test_wheel_ships_missions_and_profiles_and_finds_them_installed(tmp_path):
     missions = {f"flighttest/missions/{stem}.{ext}" for stem in MISSIONS.values() for ext in ("py", "toml")}
     assert missions <= names, sorted(missions - names)
     assert {f"flighttest/missions/{p.name}" for p in (ROOT / "missions").iterdir() if p.is_file()} <= names
-    profiles = _source_files("flighttest/profiles", "*.toml")
+    profiles = _source_files("flighttest/model/profiles", "*.toml")
     assert profiles and profiles <= names, sorted(profiles - names)
     # every module of the source tree, so a package folder missing from pyproject's list fails here
     modules = _source_files("flighttest", "*.py") | _source_files("sitl_fakes", "*.py")

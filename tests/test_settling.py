@@ -1,10 +1,10 @@
-"""When a hover counts as settled (flighttest.settling), in virtual time."""
+"""When a hover counts as settled (flighttest.flying.settling), in virtual time."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from flighttest.settling import SettleCheck
+from flighttest.flying.settling import SettleCheck
 
 
 def _run(check: SettleCheck, pos, vel, seconds: float = 3.0, rate_hz: float = 50.0) -> list[bool]:

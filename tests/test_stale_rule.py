@@ -21,13 +21,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from flighttest import guard as g
-from flighttest import mission as ms
 from flighttest.analysis.loaders.mavlink_frames import decode, read_frames
-from flighttest.flightlog import FlightLog
-from flighttest.missions_config import MissionConfig, load_mission_config, mission_config_from_dict
-from flighttest.pauses import FlightCollector
-from flighttest.profiles import load_profile
+from flighttest.flying import guard as g
+from flighttest.flying import runner as ms
+from flighttest.flying.log_writer import FlightLogWriter
+from flighttest.flying.missions_config import MissionConfig, load_mission_config, mission_config_from_dict
+from flighttest.flying.pauses import FlightCollector
+from flighttest.model.profiles import load_profile
 
 X500 = load_profile("x500")
 PX4_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "px4_sih"
@@ -245,7 +245,7 @@ def test_stale_after_s_out_of_range_is_one_line(value):
 
 
 def test_the_shipped_missions_fly_the_new_rule():
-    from flighttest.mission_scripts import MISSIONS, MISSIONS_DIR
+    from flighttest.flying.mission_scripts import MISSIONS, MISSIONS_DIR
 
     for stem in MISSIONS.values():
         cfg = load_mission_config(MISSIONS_DIR / f"{stem}.toml")
@@ -264,7 +264,7 @@ def _runner(tmp_path: Path, **guard) -> ms.MissionRunner:
     req = ms.FlyRequest(connect="udpout://127.0.0.1:14580", profile=X500, config=cfg, trajectory=traj,
                         mission_name="vertical")  # fmt: skip
     runner = ms.MissionRunner(req)
-    runner.log = FlightLog(tmp_path, "vertical", t0_mono=0.0)
+    runner.log = FlightLogWriter(tmp_path, "vertical", t0_mono=0.0)
     return runner
 
 

@@ -12,9 +12,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from flighttest.feedforward import CatchUpLimit
-from flighttest.link import VehicleLink
-from flighttest.streamer import Setpoint, SetpointStreamer, jitter_stats_ms
+from flighttest.flying.feedforward import CatchUpLimit
+from flighttest.flying.link import VehicleLink
+from flighttest.flying.streamer import Setpoint, SetpointStreamer, jitter_stats_ms
 
 HERE = (1.0, 2.0, -3.0)  # where the test says the vehicle is
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from flighttest.errors import FlighttestError
-from flighttest.profiles import load_profile
-from flighttest.trajectory import FORMAT, Trajectory
+from flighttest.model.profiles import load_profile
+from flighttest.model.trajectory import FORMAT, Trajectory
 
 
 def _traj(rate_hz: float = 50.0, t_f: float = 2.0, accel: float = 2.0) -> Trajectory:

@@ -15,7 +15,7 @@ the side still shows it.
 The hold is judged only up to the end of the descent's own phases (``stream``, then the ``settle``
 after it): a descent not settled before the landing, the hold or an abort has no time.
 
-- :class:`DescentTimer` is the rule fed one sample at a time; ``flighttest.mission`` runs it on every
+- :class:`DescentTimer` is the rule fed one sample at a time; ``flighttest.flying.runner`` runs it on every
   telemetry sample and writes its result as the ``descent_reached`` event (and ``summary.json``).
 - :func:`descent_reached` runs the same timer over arrays; :func:`from_log` over a log folder's
   state and events, so older folders (whose ``descent_reached`` used the 3D rest-to-rest test) can

@@ -1,7 +1,7 @@
 """VRS exposure of a flight, measured the way the live guard measures it.
 
 Each state sample goes through ``GuardRegion.check`` (air-relative velocity rotated into the blade
-frame = body frame, NOTES §1-2) and through ``aero.classify_n`` on the normalised ``(u, −w)/v_h``,
+frame = body frame, CONVENTIONS §1-2) and through ``aero.classify_n`` on the normalised ``(u, −w)/v_h``,
 so the analysis and the guard cannot disagree about where the vehicle was. Where the log has no
 wind the air is taken as still; where it has no attitude the vehicle is taken as level (both are
 listed in ``FlightLog.missing``).
@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from flighttest import aero
-from flighttest.profiles import VehicleProfile
+from flighttest.model import aero
+from flighttest.model.profiles import VehicleProfile
 
 NEAR_MPS = 0.3  # "near the region": within this margin (m/s) of the guard boundary
 

@@ -46,7 +46,7 @@ An onset is reported only when the fitted fluctuation at the fastest descent flo
   must then convince on its own (below).
 - *Physically plausible* (:func:`implausible`): strictly above the guard margin and a third of
   Onera's straight-down VRS entry, at most 1.5× Onera's TWS entry
-  (:func:`flighttest.profiles.plausible_w_allow_range`: 0.045–0.62 v_h with the default ε), not at
+  (:func:`flighttest.model.profiles.plausible_w_allow_range`: 0.045–0.62 v_h with the default ε), not at
   the slowest descent fitted (a rise from the first descending sample is shaking that grows with
   speed, not an onset), and known to within ``MAX_RELATIVE_UNCERTAINTY`` of itself — else
   :class:`ImplausibleOnset`, one line saying why.
@@ -71,7 +71,7 @@ from flighttest.analysis.pipeline import prepare_state
 from flighttest.analysis.schema import RATES, FlightLog
 from flighttest.errors import FlighttestError
 from flighttest.inputs import shown
-from flighttest.profiles import VehicleProfile, plausible_w_allow_range
+from flighttest.model.profiles import VehicleProfile, plausible_w_allow_range
 
 PROBE_PHASES = ("settle", "stream")
 # Per-sample noise floors of the differenced signals: far below any real gyro's or accelerometer's

@@ -30,7 +30,7 @@ from flighttest.analysis.params import relevant
 from flighttest.analysis.schema import FlightLog
 from flighttest.analysis.segment import GLITCH_COLUMNS, SegmentConfig, find_descents
 from flighttest.errors import FlighttestError
-from flighttest.profiles import VehicleProfile, load_profile
+from flighttest.model.profiles import VehicleProfile, load_profile
 
 
 @dataclass

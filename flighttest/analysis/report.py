@@ -24,8 +24,8 @@ import numpy as np
 import pandas as pd
 
 from flighttest.analysis.pipeline import Analysis
-from flighttest.chart import draw_chart
 from flighttest.errors import FlighttestError
+from flighttest.model.chart import draw_chart
 
 TABLE_COLUMNS = {
     "descent": "#",

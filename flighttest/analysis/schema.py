@@ -5,7 +5,7 @@ position stream, every other stream resampled onto those instants), and, where t
 them, the **setpoints** and **guard** decisions (flighttest log folders, PX4 setpoint topics) and
 **events**, all on the same clock ``t_s``.
 
-State columns (``STATE_COLUMNS``), all SI, NED/FRD as in NOTES §1:
+State columns (``STATE_COLUMNS``), all SI, NED/FRD as in CONVENTIONS §1:
 
 =================  ===========================================================================
 ``t_s``            seconds since the first state sample of the log (float64)
@@ -50,8 +50,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from flighttest import aero
 from flighttest.errors import FlighttestError
+from flighttest.model import aero
 
 POSITION = ["n_m", "e_m", "d_m"]
 VELOCITY = ["vn_mps", "ve_mps", "vd_mps"]
@@ -307,7 +307,7 @@ def fill_derived(df: pd.DataFrame, missing: dict[str, str], imu_fast: bool = Tru
         q = df[QUATERNION].to_numpy()
         f = df[ACCEL_BODY].to_numpy()
         if imu_fast and np.isfinite(f).any() and np.isfinite(q).any():
-            from flighttest.frames import body_to_ned
+            from flighttest.model.frames import body_to_ned
 
             _, _, fd = body_to_ned(f[:, 0], f[:, 1], f[:, 2], q[:, 0], q[:, 1], q[:, 2], q[:, 3])
             df["ad_mps2"] = fd + G_MPS2

@@ -3,7 +3,7 @@
 :class:`SyntheticFlight` is a closed-form flight: hover at ``start_alt_m``, then descents (a
 raised-cosine vertical speed profile, so a descent of height H in D seconds peaks at πH/(2D); a
 negative H is a climb, so a flight can take off from and land on the ground) or a probe
-(``d = d0 + A sin(ω0 τ²)``, NOTES §3), level attitude at a fixed yaw, and "fluctuation" on body
+(``d = d0 + A sin(ω0 τ²)``, CONVENTIONS §3), level attitude at a fixed yaw, and "fluctuation" on body
 rates, vertical acceleration and motors that grows once the descent speed passes ``onset_mps``, so
 identification has a known answer. Every quantity is a function of time, so streams written at
 different rates agree exactly.
@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from flighttest.aero import G_MPS2
 from flighttest.analysis.schema import ISA_SEA_LEVEL_PA
-from flighttest.frames import EARTH_RADIUS_M, quat_from_euler, quat_to_euler
+from flighttest.model.aero import G_MPS2
+from flighttest.model.frames import EARTH_RADIUS_M, quat_from_euler, quat_to_euler
 
 G = G_MPS2
 UNIX0 = 1_767_225_600.0  # 2026-01-01, the wall clock of synthetic tlogs

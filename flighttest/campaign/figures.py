@@ -19,8 +19,8 @@ import pandas as pd
 
 from flighttest.analysis.compare import flown_descent, primary_descent
 from flighttest.analysis.pipeline import Analysis
-from flighttest.chart import draw_chart
 from flighttest.errors import FlighttestError
+from flighttest.model.chart import draw_chart
 
 DPI = 110
 VERTICAL_COLOUR = "black"

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from flighttest.errors import FlighttestError
-from flighttest.flightlog import write_json_atomic
+from flighttest.flying.log_writer import write_json_atomic
 from flighttest.inputs import MAX_JSON_BYTES, InputFileError, read_text_file, shown
 
 STEPS = ("probe", "identify", "plan", "vertical", "helix", "report")

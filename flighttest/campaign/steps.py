@@ -21,12 +21,12 @@ import tomli_w
 
 from flighttest.campaign.state import CampaignDir, CampaignState
 from flighttest.errors import FlighttestError
-from flighttest.flightlog import write_json_atomic
+from flighttest.flying.log_writer import write_json_atomic
+from flighttest.flying.mission_scripts import MISSIONS, load_mission_module, mission_config_path
+from flighttest.flying.missions_config import DESCENT_KEYS, MissionConfig, load_mission_config
 from flighttest.inputs import atomic_write
-from flighttest.mission_scripts import MISSIONS, load_mission_module, mission_config_path
-from flighttest.missions_config import DESCENT_KEYS, MissionConfig, load_mission_config
-from flighttest.profiles import VehicleProfile, load_profile, profile_to_dict, write_w_allow
-from flighttest.trajectory import Trajectory
+from flighttest.model.profiles import VehicleProfile, load_profile, profile_to_dict, write_w_allow
+from flighttest.model.trajectory import Trajectory
 
 FLIGHT_OK = {"probe": ("probe_stopped", "completed"), "vertical": ("completed",), "helix": ("completed",)}
 
@@ -91,7 +91,7 @@ def write_configs(d: CampaignDir) -> None:
 
 def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfig, traj: Trajectory,
          traj_path: str = "") -> dict[str, Any]:  # fmt: skip
-    from flighttest.mission import FlyRequest, fly
+    from flighttest.flying.runner import FlyRequest, fly
 
     req = FlyRequest(
         connect=ctx.connect(), profile=profile, config=cfg, trajectory=traj, mission_name=step,

@@ -20,8 +20,8 @@ from flighttest.analysis.compare import add_speedup, compare_row
 from flighttest.analysis.descent_time import DescentRule
 from flighttest.campaign.state import STEPS, CampaignState
 from flighttest.errors import FlighttestError
-from flighttest.flightlog import write_json_atomic
-from flighttest.profiles import VehicleProfile
+from flighttest.flying.log_writer import write_json_atomic
+from flighttest.model.profiles import VehicleProfile
 
 REPORT_FILES = ("summary.md", "summary.json", "compare.csv", "report.md", "velocity_space.png", "descent_times.png")
 FLIGHTS = ("probe", "vertical", "helix")

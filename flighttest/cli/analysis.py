@@ -180,7 +180,7 @@ def _run(paths: list[Path], vehicle: str | None, seg, jobs: int | None = None):
     from flighttest.analysis.batch import analyse_many
 
     if vehicle:
-        from flighttest.profiles import load_profile
+        from flighttest.model.profiles import load_profile
 
         load_profile(vehicle)  # a bad profile is one error, not one per log
     results = analyse_many(paths, vehicle, seg, jobs)
@@ -524,7 +524,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     output = _check_output_folder(args.output, "report -o")
     paths = _log_paths(args.logs)
     if args.vehicle:
-        from flighttest.profiles import load_profile
+        from flighttest.model.profiles import load_profile
 
         load_profile(args.vehicle)  # a bad profile is one error, not one per log
     analyses, onsets, failed = [], {}, 0
@@ -576,7 +576,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     why this log gives no onset to trust (exit 2, nothing stored): ``flighttest.analysis.identify``."""
     from flighttest.analysis.identify import IdentifyConfig, NoOnset, identify_onset, no_onset_line
     from flighttest.analysis.loaders import load_log
-    from flighttest.profiles import load_profile, write_w_allow
+    from flighttest.model.profiles import load_profile, write_w_allow
 
     if not (math.isfinite(args.threshold) and 1.0 < args.threshold <= MAX_THRESHOLD_RATIO):
         raise FlighttestError(f"--threshold must be a number > 1 and at most {MAX_THRESHOLD_RATIO:g} "

@@ -38,7 +38,7 @@ from flighttest.errors import FlighttestError
 from flighttest.inputs import Range, shown
 
 if TYPE_CHECKING:
-    from flighttest.profiles import VehicleProfile
+    from flighttest.model.profiles import VehicleProfile
 
 SIM_DEFAULT_PARAMS = {"MPC_Z_VEL_MAX_DN": 3.0}  # rehearsal: let offboard descents through unclipped
 
@@ -84,7 +84,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from flighttest.flightlog import default_log_root
+    from flighttest.flying.log_writer import default_log_root
 
     args.sim, args.connect, args.only, args.start, args.yes = True, None, None, None, True
     args.output = args.output or str(default_log_root() / f"demo-{dt.datetime.now():%Y%m%d-%H%M%S}")
@@ -100,7 +100,7 @@ SEED = Range(0, 2**32 - 1, integer=True)  # what the fake's random generator tak
 def _validate(args: argparse.Namespace) -> dict[str, Any]:
     """Every input checked before the fake starts or anything connects; returns the fake's options."""
     from flighttest import inputs as ip
-    from flighttest.link import check_connection, check_url
+    from flighttest.flying.link import check_connection, check_url
 
     if args.connect:
         check_url(args.connect)
@@ -218,7 +218,7 @@ def _json_stop(args: argparse.Namespace, known: dict[str, Any], error: str, outc
 def _campaign(args: argparse.Namespace, known: dict[str, Any]) -> int:
     from flighttest.campaign.steps import RUNNERS, StepContext, StepFailed, write_configs
     from flighttest.cli.fly import confirm_go
-    from flighttest.profiles import load_profile
+    from flighttest.model.profiles import load_profile
 
     sim_opts = _validate(args)
     vehicle = args.vehicle or "x500"

@@ -19,7 +19,7 @@ from typing import Any
 
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
-from flighttest.mission_scripts import MISSIONS, load_mission_module, search_dirs
+from flighttest.flying.mission_scripts import MISSIONS, load_mission_module, search_dirs
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -71,8 +71,8 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
 def mission_defaults() -> dict[str, str]:
     """The named missions' start heights and descents as their TOMLs set them, for ``--help``
     (``height``: "probe 8 m, helix 7 m, vertical 5 m"; a config that does not load says so)."""
-    from flighttest.mission_scripts import mission_config_path
-    from flighttest.missions_config import DESCENT_KEYS, load_mission_config
+    from flighttest.flying.mission_scripts import mission_config_path
+    from flighttest.flying.missions_config import DESCENT_KEYS, load_mission_config
 
     heights, descents = [], []
     for mission in MISSIONS:
@@ -91,7 +91,7 @@ def mission_defaults() -> dict[str, str]:
 def with_descent(cfg, descent_m: float | None, target: str):
     """The config with ``--descent`` applied (``missions_config.DESCENT_KEYS``), refused for a trajectory
     file (and a helix config flying a planned file): their descent is in the file."""
-    from flighttest.missions_config import DESCENT_KEYS
+    from flighttest.flying.missions_config import DESCENT_KEYS
 
     if descent_m is None:
         return cfg
@@ -109,7 +109,7 @@ def with_descent(cfg, descent_m: float | None, target: str):
 def check_room(cfg) -> None:
     """The mission's descent fits between its start height and the altitude floor (one line, exit 2,
     before anything connects)."""
-    from flighttest.missions_config import DESCENT_KEYS
+    from flighttest.flying.missions_config import DESCENT_KEYS
 
     fl = cfg.flight
     if fl.start_height_m <= fl.min_alt_m:
@@ -158,11 +158,11 @@ def log_root(text: str | None) -> Path:
 
 def build_request(args: argparse.Namespace, mission: str | None = None, module: ModuleType | None = None):
     """Profile, config (file + command-line overrides), trajectory → ``FlyRequest``."""
-    from flighttest.link import check_connection, check_url
-    from flighttest.mission import FlyRequest, check_duration
-    from flighttest.missions_config import MissionConfig, load_mission_config
-    from flighttest.profiles import load_profile
-    from flighttest.trajectory import Trajectory
+    from flighttest.flying.link import check_connection, check_url
+    from flighttest.flying.missions_config import MissionConfig, load_mission_config
+    from flighttest.flying.runner import FlyRequest, check_duration
+    from flighttest.model.profiles import load_profile
+    from flighttest.model.trajectory import Trajectory
 
     check_url(args.connect)
     _check_numbers(args)
@@ -227,7 +227,7 @@ def confirm_go(pre) -> bool:
 
 
 def run_request(req, as_json: bool) -> int:
-    from flighttest.mission import fly
+    from flighttest.flying.runner import fly
 
     out = asyncio.run(fly(req))
     summary = out.summary()

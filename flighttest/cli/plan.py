@@ -1,6 +1,6 @@
 """``flighttest plan planar|helix|vertical|probe``: plan a descent and write a trajectory file.
 
-Every command writes ``PATH.csv`` + ``PATH.json`` (``flighttest.trajectory``), prints a rich
+Every command writes ``PATH.csv`` + ``PATH.json`` (``flighttest.model.trajectory``), prints a rich
 summary (or ``--json``), and can draw a PNG (``--plot``). A solve that does not converge is
 reported with its status and best point, writes nothing, and exits with code 1.
 """
@@ -18,13 +18,14 @@ from rich.table import Table
 from flighttest import inputs as ip
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
-from flighttest.mission_scripts import mission_config_path
-from flighttest.missions_config import load_mission_config
-from flighttest.plan_config import ProbePlanConfig, VerticalPlanConfig
-from flighttest.profiles import VehicleProfile, load_profile
+from flighttest.flying.mission_scripts import mission_config_path
+from flighttest.flying.missions_config import load_mission_config
+from flighttest.flying.plan_config import ProbePlanConfig, VerticalPlanConfig
+from flighttest.model.profiles import VehicleProfile, load_profile
 
 SOLVER_FAILED = 1
-PROBE, VERTICAL = ProbePlanConfig(), VerticalPlanConfig()  # `flighttest fly`'s plan defaults (flighttest.plan_config)
+# `flighttest fly`'s plan defaults (flighttest.flying.plan_config)
+PROBE, VERTICAL = ProbePlanConfig(), VerticalPlanConfig()
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -91,7 +92,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Descent speed grows slowly; ends at the last whole cycle under the speed cap and duration; "
         "the amplitude must fit above the altitude floor. Output lists when each descent speed is first reached.",
     )
-    # the defaults are `flighttest fly probe`'s (flighttest.plan_config, the probe mission's [flight])
+    # the defaults are `flighttest fly probe`'s (flighttest.flying.plan_config, the probe mission's [flight])
     pr.add_argument("--amplitude", type=ip.HEIGHT_M, default=PROBE.amplitude_m, metavar="M",
                     help=f"max depth below start ({PROBE.amplitude_m:g})")
     pr.add_argument("--omega0", type=ip.CHIRP_RATE_RPS2, default=PROBE.omega0_rps2, metavar="RPS2",
@@ -148,7 +149,7 @@ def _constraint(args: argparse.Namespace, profile: VehicleProfile, paper: bool):
 def _out_path(args: argparse.Namespace, default: str) -> Path:
     """The output stem, its two files and the plot checked before anything is solved: a plan that
     cannot be written is not computed (``-o ''`` or a path under a file is one line, not a traceback)."""
-    from flighttest.trajectory import file_paths
+    from flighttest.model.trajectory import file_paths
 
     stem = args.output if args.output is not None else str(Path("trajectories") / default)
     if not str(stem).strip():

@@ -10,12 +10,12 @@ import numpy as np
 import pandas as pd
 from rich.table import Table
 
-from flighttest import aero
 from flighttest import inputs as ip
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
-from flighttest.frames import validate_quaternion
-from flighttest.profiles import load_profile
+from flighttest.model import aero
+from flighttest.model.frames import validate_quaternion
+from flighttest.model.profiles import load_profile
 
 IN_COLUMNS = ["vn", "ve", "vd", "qw", "qx", "qy", "qz"]
 WIND_COLUMNS = ["wn", "we", "wd"]
@@ -51,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_chart(args: argparse.Namespace) -> int:
-    from flighttest.chart import write_chart
+    from flighttest.model.chart import write_chart
 
     profile = load_profile(args.vehicle)
     out = ip.check_output_path(args.output, "-o/--output", ip.IMAGE_SUFFIXES)

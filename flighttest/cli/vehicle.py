@@ -8,7 +8,7 @@ import sys
 from rich.table import Table
 
 from flighttest.console import console, print_json
-from flighttest.profiles import load_profile, scan_profiles
+from flighttest.model.profiles import load_profile, scan_profiles
 
 
 def register(sub: argparse._SubParsersAction) -> None:

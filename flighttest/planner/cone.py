@@ -1,6 +1,6 @@
 """The VRS/WBS velocity constraint as the optimiser sees it (smooth, sound) and as we check it (exact).
 
-Physical statement (NOTES §2, paper Definition 1): in the blade-disk (= body) frame, with
+Physical statement (CONVENTIONS §2, paper Definition 1): in the blade-disk (= body) frame, with
 ``w = v_b,z`` (air flowing up through the disk) and ``u = |in-plane air speed|``, the state is
 allowed iff ``w ≤ max(w_allow, tan(cone)·u) − margin`` or ``w ≤ 0``. The paper's optimisation used
 the pure cone: ``w_allow = 0``, ``margin = 0``, i.e. ``w ≤ tan(20°)·|u|``.
@@ -21,7 +21,7 @@ remaining non-convexity (which side to pass, how many reversals) is handled by s
 initial guesses and keeping the best (``planar.py``), not by binaries or complementarity
 constraints, which IPOPT handles badly (degenerate multipliers at ``u⁺u⁻ = 0``).
 
-The exact check of a finished trajectory uses ``flighttest.aero.guard_margin_mps`` — the same
+The exact check of a finished trajectory uses ``flighttest.model.aero.guard_margin_mps`` — the same
 function the flying guard uses.
 """
 
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from flighttest.aero import CONE_DEG, guard_margin_mps
+from flighttest.model.aero import CONE_DEG, guard_margin_mps
 
 DEFAULT_SMOOTHING_MPS = 0.02
 
@@ -101,7 +101,7 @@ class VelocityConstraint:
 
 
 def planar_blade_velocity(vy, vz, phi, cos=np.cos, sin=np.sin):
-    """Body-frame in-plane ``u = v_b,y`` and through-disk ``w = v_b,z`` for roll ``φ`` (NOTES §2).
+    """Body-frame in-plane ``u = v_b,y`` and through-disk ``w = v_b,z`` for roll ``φ`` (CONVENTIONS §2).
 
     ``v_b,y = cosφ·V_Y + sinφ·V_Z``, ``v_b,z = −sinφ·V_Y + cosφ·V_Z`` (air-relative velocities).
     Pass ``cos=ca.cos, sin=ca.sin`` for symbolic use.

@@ -1,4 +1,4 @@
-"""Planner outputs → ``flighttest.trajectory.Trajectory`` (one file format for every planner)."""
+"""Planner outputs → ``flighttest.model.trajectory.Trajectory`` (one file format for every planner)."""
 
 from __future__ import annotations
 
@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 
-from flighttest.aero import G_MPS2
-from flighttest.frames import quat_to_euler, quat_to_rotmat
+from flighttest.model.aero import G_MPS2
+from flighttest.model.frames import quat_to_euler, quat_to_rotmat
+from flighttest.model.trajectory import Trajectory
 from flighttest.planner import helix as helix_mod
 from flighttest.planner import planar as planar_mod
 from flighttest.planner.probe import ProbePlan
 from flighttest.planner.vertical import VerticalPlan
-from flighttest.trajectory import Trajectory
 
 OUTPUT_RATE_HZ = 100.0
 

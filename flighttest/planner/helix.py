@@ -41,9 +41,10 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
-from flighttest.aero import G_MPS2
 from flighttest.errors import FlighttestError
-from flighttest.frames import quat_from_euler, quat_multiply, quat_to_rotmat
+from flighttest.model.aero import G_MPS2
+from flighttest.model.frames import quat_from_euler, quat_multiply, quat_to_rotmat
+from flighttest.model.profiles import VehicleProfile
 from flighttest.planner.cone import VelocityConstraint
 from flighttest.planner.ocp import (
     DenseSolution,
@@ -54,7 +55,6 @@ from flighttest.planner.ocp import (
     resample_guess,
     rk4_piecewise,
 )
-from flighttest.profiles import VehicleProfile
 
 NX, NU = 10, 4
 QUAT_STAB = 1.0

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
-from flighttest.aero import G_MPS2
 from flighttest.errors import FlighttestError
+from flighttest.model.aero import G_MPS2
 from flighttest.planner.cone import VelocityConstraint, planar_blade_velocity
 from flighttest.planner.ocp import (
     MinTimeOcp,

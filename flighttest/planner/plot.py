@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from flighttest.aero import guard_bound_mps
 from flighttest.errors import FlighttestError
-from flighttest.frames import blade_velocity_mps
+from flighttest.model.aero import guard_bound_mps
+from flighttest.model.frames import blade_velocity_mps
+from flighttest.model.trajectory import Trajectory
 from flighttest.planner.cone import VelocityConstraint
-from flighttest.trajectory import Trajectory
 
 
 def blade_series(traj: Trajectory, wind_ned_mps=(0.0, 0.0, 0.0)):

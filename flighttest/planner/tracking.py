@@ -20,9 +20,9 @@ from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from flighttest.errors import FlighttestError
+from flighttest.model.profiles import VehicleProfile
 from flighttest.planner.cone import VelocityConstraint
 from flighttest.planner.helix import HelixProblem, problem_for_vehicle
-from flighttest.profiles import VehicleProfile
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flighttest.errors import FlighttestError
-from flighttest.profiles import VehicleProfile
+from flighttest.model.profiles import VehicleProfile
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,7 @@ from flighttest.analysis.schema import (
     resample,
 )
 from flighttest.errors import FlighttestError
-from flighttest.frames import EARTH_RADIUS_M, quat_from_euler
+from flighttest.model.frames import EARTH_RADIUS_M, quat_from_euler
 
 MAX_GAP_S = 1.0
 DF_MAGIC = b"\xa3\x95"

@@ -71,7 +71,7 @@ from flighttest.analysis.schema import (
     stream_rate_hz,
 )
 from flighttest.errors import FlighttestError
-from flighttest.frames import EARTH_RADIUS_M, body_to_ned, quat_from_euler
+from flighttest.model.frames import EARTH_RADIUS_M, body_to_ned, quat_from_euler
 
 MAX_GAP_S = 1.0
 MAV_FRAME_BODY_FRD = 12

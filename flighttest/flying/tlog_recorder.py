@@ -1,7 +1,7 @@
 """A ``.tlog`` recorder: a pymavlink parser on a local UDP port, writing what MAVSDK forwards to it.
 
 MAVSDK forwards the vehicle's traffic to a ``udpout://127.0.0.1:PORT`` connection added with
-``ForwardingOption.ON`` (NOTES §4). The recorder binds that port first (port 0 → the OS picks a
+``ForwardingOption.ON`` (CONVENTIONS §4). The recorder binds that port first (port 0 → the OS picks a
 free one), parses the datagrams with pymavlink so only whole, CRC-checked frames are written, and
 stores each as the 8-byte big-endian microsecond timestamp + raw frame that MAVProxy, MAVExplorer
 and ``mavutil.mavlink_connection(path)`` read. It runs in a daemon thread and flushes the file at

@@ -24,9 +24,7 @@ import numpy as np
 import pandas as pd
 
 from flighttest import __version__
-from flighttest.aero import G_MPS2
 from flighttest.errors import FlighttestError
-from flighttest.frames import quat_to_rotmat
 from flighttest.inputs import (
     MAX_ACCEL_MPS2,
     MAX_CSV_BYTES,
@@ -41,9 +39,11 @@ from flighttest.inputs import (
     read_text_file,
     shown,
 )
+from flighttest.model.aero import G_MPS2
+from flighttest.model.frames import quat_to_rotmat
 
 if TYPE_CHECKING:
-    from flighttest.profiles import VehicleProfile
+    from flighttest.model.profiles import VehicleProfile
 
 FORMAT = "flighttest-trajectory/1"
 KINDS = ("planar", "helix", "vertical", "probe")

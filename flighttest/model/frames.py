@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flighttest.aero import CONE_DEG, guard_margin_mps
+from flighttest.model.aero import CONE_DEG, guard_margin_mps
 
 UNIT_QUAT_TOL = 1e-3
 # WGS-84 equatorial radius: local north/east metres from latitude/longitude (flat Earth over a flight)

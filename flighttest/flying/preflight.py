@@ -12,12 +12,12 @@ import numpy as np
 from rich.table import Table
 
 from flighttest.errors import FlighttestError
-from flighttest.frames import GuardRegion
-from flighttest.guard import predicted_blade_velocity_mps
+from flighttest.flying.guard import predicted_blade_velocity_mps
+from flighttest.flying.link import TelemetryState
 from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M
-from flighttest.link import TelemetryState
-from flighttest.profiles import VehicleProfile
-from flighttest.trajectory import LIMIT_REL_TOL, Trajectory
+from flighttest.model.frames import GuardRegion
+from flighttest.model.profiles import VehicleProfile
+from flighttest.model.trajectory import LIMIT_REL_TOL, Trajectory
 
 PASS, WARN, FAIL = "pass", "warn", "fail"
 

@@ -2,7 +2,7 @@
 stream the trajectory → settle → land (or hold with ``--no-land``).
 
 Ctrl-C, SIGTERM, an exception, a guard abort, stale telemetry, link loss or leaving offboard at any
-point cancel the nominal flow and run the abort ladder (``flighttest.guard.AbortLadder``) until the
+point cancel the nominal flow and run the abort ladder (``flighttest.flying.guard.AbortLadder``) until the
 vehicle is held or on the ground; a second Ctrl-C skips to the next rung. The outcome, its reason
 and the log folder come back as a ``FlightOutcome``; ``summary.json`` is written last.
 """
@@ -21,20 +21,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from flighttest import guard as gd
 from flighttest.analysis import descent_time as dtime
 from flighttest.errors import FlighttestError
-from flighttest.feedforward import CatchUpLimit, Feedforward, for_autopilot, z_position_gain_per_s
-from flighttest.flightlog import FlightLog
+from flighttest.flying import guard as gd
+from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopilot, z_position_gain_per_s
+from flighttest.flying.link import VehicleLink
+from flighttest.flying.log_writer import FlightLogWriter
+from flighttest.flying.missions_config import MissionConfig
+from flighttest.flying.pauses import FlightCollector
+from flighttest.flying.preflight import (
+    PreflightResult,
+    param_checks,
+    trajectory_checks,
+    trajectory_stats,
+    vehicle_checks,
+)
+from flighttest.flying.settling import SettleCheck
+from flighttest.flying.streamer import Setpoint, SetpointStreamer
 from flighttest.inputs import MAX_DURATION_S
-from flighttest.link import VehicleLink
-from flighttest.missions_config import MissionConfig
-from flighttest.pauses import FlightCollector
-from flighttest.preflight import PreflightResult, param_checks, trajectory_checks, trajectory_stats, vehicle_checks
-from flighttest.profiles import VehicleProfile
-from flighttest.settling import SettleCheck
-from flighttest.streamer import Setpoint, SetpointStreamer
-from flighttest.trajectory import Trajectory
+from flighttest.model.profiles import VehicleProfile
+from flighttest.model.trajectory import Trajectory
 
 PILOT_MODES = gd.PILOT_MODES
 CLIMB_RATE_MPS = 1.0
@@ -43,7 +49,7 @@ HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag befor
 # is off by 0.1-0.2 m/s: ../shared/px4_sih; tighter and a real vehicle never settles)
 SETTLE_TOL_M = 0.6
 SETTLE_SPEED_MPS = 0.25
-SETTLE_WINDOW_S = 1.0  # … or its position moved that slowly over this window (flighttest.settling)
+SETTLE_WINDOW_S = 1.0  # … or its position moved that slowly over this window (flighttest.flying.settling)
 LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
 # a trajectory longer than this outlasts the battery (flighttest.inputs): a damaged file, not a flight,
 # and resampling it at the setpoint rate could need more memory than there is
@@ -102,7 +108,7 @@ def _healthy(st) -> bool:
 
 
 class MissionRunner:
-    _collector: FlightCollector | None = None  # the garbage collector held off while flying (flighttest.pauses)
+    _collector: FlightCollector | None = None  # the garbage collector held off while flying (flighttest.flying.pauses)
 
     def __init__(self, req: FlyRequest) -> None:
         self.req = req
@@ -112,7 +118,7 @@ class MissionRunner:
         self.phase = "init"
         self.link: VehicleLink | None = None
         self.streamer: SetpointStreamer | None = None
-        self.log: FlightLog | None = None
+        self.log: FlightLogWriter | None = None
         self.last_decision: gd.Decision | None = None
         self.ladder = gd.AbortLadder(gd.LadderTiming(
             recover_max_s=self.cfg.abort.recover_max_s, arrested_vd_mps=self.cfg.abort.arrested_vd_mps,
@@ -183,7 +189,7 @@ class MissionRunner:
 
     # -- telemetry listeners -------------------------------------------------------------------------
     def _feedforward(self, params: dict[str, Any] | None, autopilot: str | None) -> Feedforward:
-        """The feed-forward corrections for this vehicle and autopilot (``flighttest.feedforward``):
+        """The feed-forward corrections for this vehicle and autopilot (``flighttest.flying.feedforward``):
         PX4 decouples the tilt from the vertical acceleration unless ``MPC_ACC_DECOUPLE`` is 0. Also
         gives the streamer its catch-up limit, through the autopilot's vertical position gain."""
         decoupled = autopilot == "PX4"
@@ -265,7 +271,7 @@ class MissionRunner:
             self.abort("link lost while landing", gd.Rung.LAND)
 
     async def _stale_ticker(self) -> None:
-        """Stale telemetry between samples, every telemetry period, by phase (``flighttest.guard``,
+        """Stale telemetry between samples, every telemetry period, by phase (``flighttest.flying.guard``,
         "Stale telemetry"): while flighttest flies offboard, no state sample for ``stale_after_s`` aborts
         (the ladder starts at Recover). Where PX4 flies itself (arming, its takeoff, its Land, the Hold
         of --no-land) a gap is logged once per gap (``stale_while_landing`` / ``stale_while_<phase>``) and
@@ -319,7 +325,7 @@ class MissionRunner:
             self.event("telemetry_gaps", phase=phase, max_gap_ms=round(self.guard.max_gap_s * 1000.0, 1))
         self.guard.max_gap_s = 0.0
 
-    # -- loop pauses: the garbage collector (flighttest.pauses) --------------------------------------
+    # -- loop pauses: the garbage collector (flighttest.flying.pauses) --------------------------------------
     def _freeze_heap(self) -> None:
         """Connected, before the preflight: one full collection (a full one of this heap pauses the process
         for up to a few hundred ms) and everything alive frozen, out of every later collection."""
@@ -350,7 +356,7 @@ class MissionRunner:
     # -- the run -------------------------------------------------------------------------------------
     async def run(self) -> FlightOutcome:
         req = self.req
-        self.log = FlightLog(req.log_root, self.mission_name)
+        self.log = FlightLogWriter(req.log_root, self.mission_name)
         try:
             self.log.write_meta({
                 "mission": self.mission_name, "config": self.cfg.to_dict(), "vehicle": req.profile.summary(),
@@ -450,7 +456,7 @@ class MissionRunner:
             panel = None
             if req.show_panel:
                 from flighttest.console import console
-                from flighttest.panel import LivePanel
+                from flighttest.flying.panel import LivePanel
 
                 panel = LivePanel(self, console)
             self.panel = panel
@@ -536,7 +542,7 @@ class MissionRunner:
                 self.event("healthy")
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
         params = {}
-        from flighttest.preflight import ABORT_PARAMS
+        from flighttest.flying.preflight import ABORT_PARAMS
 
         for name, kind in ABORT_PARAMS.items():
             params[name] = await link.get_param(name, kind)

@@ -1,6 +1,6 @@
 """The MAVLink link to the vehicle through MAVSDK 4 (``mavsdk.asyncio``), with a ``.tlog`` recorder.
 
-Rules this module keeps (NOTES §4):
+Rules this module keeps (CONVENTIONS §4):
 
 - ``Mavsdk`` is destroyed explicitly in ``close()``, never by the garbage collector, and never while
   a blocking C call is still running: every blocking call goes through ``call()``, which keeps the
@@ -295,7 +295,7 @@ class VehicleLink:
             _log_sinks.append(self._on_mavsdk_log)
         self._mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
         if self.tlog_path is not None:
-            from flighttest.tlog import TlogRecorder
+            from flighttest.flying.tlog_recorder import TlogRecorder
 
             self._recorder = TlogRecorder(self.tlog_path).start()
         try:
@@ -351,7 +351,7 @@ class VehicleLink:
     def offboard_setters(self):
         """MAVSDK's synchronous offboard plugin under ``OffboardAsync``: its setters only store the
         setpoint and queue one message, so the streamer calls them on the loop, with no executor hop
-        that could be left in flight when the link closes (``flighttest.streamer``). The one place
+        that could be left in flight when the link closes (``flighttest.flying.streamer``). The one place
         flighttest reaches under MAVSDK's asyncio wrapper; ``tests/test_link_api.py`` fails loudly if
         MAVSDK changes it."""
         plugin = getattr(self.offboard, "_plugin", None)

@@ -5,7 +5,7 @@ plan parameters through these dataclasses, so what ``flighttest plan probe`` sho
 fly probe`` flies. A mission TOML may leave any key out (the default here applies); the shipped TOMLs
 write every key out for the user to edit, and ``tests/test_plan_config.py`` holds them equal to these
 defaults. The ranges each key is checked against live beside the TOML reader
-(``flighttest.missions_config``); the helix's tracking margins are ``flighttest.planner.tracking``'s.
+(``flighttest.flying.missions_config``); the helix's tracking margins are ``flighttest.planner.tracking``'s.
 """
 
 from __future__ import annotations

@@ -12,10 +12,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import ListedColormap
 
-from flighttest import aero
 from flighttest.errors import FlighttestError
 from flighttest.inputs import IMAGE_SUFFIXES, atomic_write
-from flighttest.profiles import VehicleProfile
+from flighttest.model import aero
+from flighttest.model.profiles import VehicleProfile
 
 REGION_COLOURS = ["#d9f2d9", "#ffb366", "#e04040", "#6fa8dc"]  # normal, VRS, TWS, WBS
 

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from flighttest.errors import FlighttestError
-from flighttest.guard import AUTOPILOT_STALE_S, STALE_AFTER_S
+from flighttest.flying.guard import AUTOPILOT_STALE_S, STALE_AFTER_S
 from flighttest.inputs import (
     ALTITUDE_FLOOR_M,
     CHIRP_RATE_RPS2,
@@ -59,11 +59,11 @@ class FlightConfig:
     takeoff_timeout_s: float = 40.0
     connect_timeout_s: float = 15.0
     min_battery_percent: float = 30.0
-    # the acceleration feed-forward is sent this much ahead of the plan (flighttest.feedforward): the
+    # the acceleration feed-forward is sent this much ahead of the plan (flighttest.flying.feedforward): the
     # autopilot's tilt trails a new thrust direction by about this long
     feedforward_lead_s: float = 0.2
     # catching up with the plan, the autopilot is never asked to descend faster than
-    # max(plan + catch_up_excess_mps, catch_up_floor_mps) (flighttest.feedforward.CatchUpLimit): an EKF
+    # max(plan + catch_up_excess_mps, catch_up_floor_mps) (flighttest.flying.feedforward.CatchUpLimit): an EKF
     # that trails a descent would otherwise turn its position error into a descent rate the guard aborts on
     catch_up_excess_mps: float = 0.1
     catch_up_floor_mps: float = 0.3
@@ -74,7 +74,7 @@ class GuardConfig:
     horizon_s: float = 0.1
     debounce_samples: int = 3
     clear_violation_mps: float = 0.05
-    # no state telemetry this long while flighttest flies offboard: abort (flighttest.guard "Stale telemetry")
+    # no state telemetry this long while flighttest flies offboard: abort (flighttest.flying.guard "Stale telemetry")
     stale_after_s: float = STALE_AFTER_S
     stale_periods: float | None = None  # the older spelling, in telemetry periods: when given it wins
     observe_region: bool = False

@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flighttest.aero import G_MPS2
-from flighttest.trajectory import Trajectory
+from flighttest.model.aero import G_MPS2
+from flighttest.model.trajectory import Trajectory
 
 # the fraction of g below which the vertical thrust would vanish: no tilt can be matched there
 MIN_SPECIFIC_THRUST_MPS2 = 0.1 * G_MPS2

@@ -36,7 +36,7 @@ GUARD_COLUMNS = (
 )  # fmt: skip
 
 
-# every file a flight log folder may hold (docs/CONTRACTS.md), for ``FlightLog.discard``
+# every file a flight log folder may hold (docs/CONTRACTS.md), for ``FlightLogWriter.discard``
 LOG_FILES = frozenset({"meta.json", "flight.tlog", "setpoints.csv", "guard.csv", "events.jsonl", "preflight.json",
                        "params.json", "trajectory.csv", "trajectory.json", "summary.json"})  # fmt: skip
 
@@ -57,7 +57,7 @@ def write_json_atomic(path: Path, data: Any) -> None:
     tmp.replace(path)
 
 
-class FlightLog:
+class FlightLogWriter:
     """The open log folder of one flight. ``t_s`` columns count from ``t0_mono`` (mission start)."""
 
     def __init__(self, root: Path | str, mission: str, t0_mono: float | None = None) -> None:
@@ -120,7 +120,7 @@ class FlightLog:
         self.flush_if_due()
 
     def guard(self, decision) -> None:
-        """One guard decision with the inputs it was made from (``flighttest.guard.Decision``)."""
+        """One guard decision with the inputs it was made from (``flighttest.flying.guard.Decision``)."""
         if self.closed:
             return
         t, u = self.times(decision.t_s)

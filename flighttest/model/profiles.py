@@ -1,6 +1,6 @@
 """Vehicle profiles: TOML files describing a quadcopter and its VRS boundary, validated on load.
 
-Shipped profiles live in ``flighttest/profiles/``. User profiles are searched first, in the folders
+Shipped profiles live in ``flighttest/model/profiles/``. User profiles are searched first, in the folders
 of ``$FLIGHTTEST_VEHICLES`` (``os.pathsep``-separated) and then ``~/.config/flighttest/vehicles``;
 a path to a ``.toml`` file works wherever a name does. ``flighttest identify --write-profile``
 writes measured boundaries into the user folder, never into the package.
@@ -17,9 +17,7 @@ from typing import Any
 
 import tomli_w
 
-from flighttest import aero
 from flighttest.errors import FlighttestError
-from flighttest.frames import GuardRegion
 from flighttest.inputs import (
     MARGIN_MPS,
     MAX_SPEED_MPS,
@@ -31,6 +29,8 @@ from flighttest.inputs import (
     check_text,
     shown,
 )
+from flighttest.model import aero
+from flighttest.model.frames import GuardRegion
 from flighttest.tomlfile import read_toml
 
 SHIPPED_DIR = Path(__file__).with_name("profiles")
@@ -94,7 +94,7 @@ class VehicleProfile:
 
     @property
     def v_h_mps(self) -> float:
-        """Hover induced velocity per rotor (NOTES §1), m/s."""
+        """Hover induced velocity per rotor (CONVENTIONS §1), m/s."""
         return float(
             aero.hover_induced_velocity_mps(
                 self.hover_thrust_per_rotor_n, self.air_density_kgpm3, self.disk_area_m2

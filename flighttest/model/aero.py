@@ -2,7 +2,7 @@
 
 All functions are pure and vectorised over numpy arrays (scalars work too).
 
-Conventions (NOTES §1-2): the aerodynamic formulas use the paper's *climb-positive* axial speed
+Conventions (CONVENTIONS §1-2): the aerodynamic formulas use the paper's *climb-positive* axial speed
 ``v_z = -w`` and in-plane speed ``v_H = u`` in the blade-disk (= body) frame. Quantities named
 ``*_n`` are normalised by the hover induced velocity ``v_h``; ``*_mps`` are in m/s.
 """

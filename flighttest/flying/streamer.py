@@ -8,7 +8,7 @@ MAVSDK re-sends the last setpoint at 20 Hz on its own, also when our loop is stu
 - whenever it stops — end of trajectory, abort, exception — it leaves a *hold* setpoint (position
   here, zero velocity and acceleration) as the one MAVSDK keeps re-sending;
 - with a ``catch_up`` limit, every position setpoint is sent at most that far below the vehicle
-  (``flighttest.feedforward.CatchUpLimit``); the setpoint log holds what was sent;
+  (``flighttest.flying.feedforward.CatchUpLimit``); the setpoint log holds what was sent;
 - a watchdog thread leaves that hold setpoint too if the loop stops sending for ``stuck_after_s``
   (an event loop blocked by something else must not keep a descent's feed-forward alive).
 
@@ -29,8 +29,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from flighttest.feedforward import CatchUpLimit
-from flighttest.trajectory import Trajectory
+from flighttest.flying.feedforward import CatchUpLimit
+from flighttest.model.trajectory import Trajectory
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,7 +93,7 @@ class SetpointStreamer:
         self.on_send: list[Callable[[float, Setpoint], None]] = []
         # where the vehicle is now (local NED): a stream that stops early holds there
         self.here = here
-        # bounds each position setpoint's downward catch-up (flighttest.feedforward.CatchUpLimit)
+        # bounds each position setpoint's downward catch-up (flighttest.flying.feedforward.CatchUpLimit)
         self.catch_up: CatchUpLimit | None = None
         self.last_planned: Setpoint | None = None  # the last setpoint before that bound
 

@@ -7,7 +7,7 @@ telemetry between samples, by the phase of the flight (see "Stale telemetry" bel
 ``AbortLadder`` turns a trigger into the sequence recovery setpoint → Hold → Land and tells the
 runner which command to send next; the runner only executes.
 
-Frames and signs follow NOTES §1: NED, body FRD, ``w > 0`` means air flows up through the disk.
+Frames and signs follow CONVENTIONS §1: NED, body FRD, ``w > 0`` means air flows up through the disk.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from collections import deque
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from flighttest.aero import G_MPS2
-from flighttest.frames import GuardRegion
+from flighttest.model.aero import G_MPS2
+from flighttest.model.frames import GuardRegion
 
 # Verdicts (guard.csv ``verdict``)
 OK = "ok"
@@ -61,7 +61,7 @@ OBSERVE = "observe"
 #   sets ``stale_after_s`` = ``stale_periods`` × the telemetry period (``GuardLimits``: the one place).
 STALE_AFTER_S = 0.25
 AUTOPILOT_STALE_S = 1.0
-# the runner's phases (flighttest.mission set_phase) in which flighttest streams offboard setpoints …
+# the runner's phases (flighttest.flying.runner set_phase) in which flighttest streams offboard setpoints …
 OFFBOARD_PHASES = frozenset({"climb", "settle", "stream"})
 # … and those in which PX4 flies by itself; any other phase (before arming) is judged as offboard,
 # with the guard disarmed

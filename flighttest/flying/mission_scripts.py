@@ -35,7 +35,7 @@ from flighttest.errors import FlighttestError
 
 MISSIONS = {"probe": "vrs_probe", "helix": "helix_descent", "vertical": "vertical_descent"}
 
-_SOURCE_ROOT = Path(__file__).resolve().parents[1]
+_SOURCE_ROOT = Path(__file__).resolve().parents[2]
 # the checkout's missions/: only when this flighttest is a source tree (site-packages has no pyproject.toml)
 CHECKOUT_DIR: Path | None = _SOURCE_ROOT / "missions" if (_SOURCE_ROOT / "pyproject.toml").is_file() else None
 
@@ -119,4 +119,4 @@ def load_mission_module(name: str) -> ModuleType:
 
 
 # The shipped missions' folder (tests read the shipped TOMLs from it); lookups go through mission_dir().
-MISSIONS_DIR: Path = shipped_dir() or Path(__file__).with_name("missions")
+MISSIONS_DIR: Path = shipped_dir() or Path(__file__).resolve().parents[1] / "missions"
