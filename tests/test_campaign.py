@@ -181,3 +181,26 @@ def test_resume_order_and_needs(tmp_path):
     assert state.steps["identify"].status == "pending"
     with pytest.raises(FlighttestError, match="step 'identify' has not completed"):
         state.output("identify", "profile")
+
+
+@pytest.mark.flight
+def test_campaign_on_the_sih_quadx_fake_runs_all_six_steps(tmp_path):
+    # issue 11: the campaign passes on the fake with the PX4 SIH quad as with x500. Its probe finds the
+    # fake's onset (Onera's, 0.75 m/s) to about ±25 %: identified, or refused and the prior (the same
+    # 0.75) kept with a line saying so — either way the six steps run and the helix is faster
+    out = tmp_path / "campaign"
+    env = {**os.environ, "FLIGHTTEST_VEHICLES": str(tmp_path / "my_vehicles")}
+    cmd = [sys.executable, "-m", "flighttest", "campaign", "--sim", "--vehicle", "sih_quadx", "--yes", "-o",
+           str(out), "--json", "--stale-periods", "15"]  # fmt: skip
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads(r.stdout)
+    steps = _steps(out)
+    assert all(steps[x]["status"] == "done" for x in STEPS), steps
+    assert s["vehicle"] == "sih_quadx" and s["speedup_helix_vs_vertical"] > 1.4
+    md = (out / "report" / "summary.md").read_text()
+    if s["onset_found"]:
+        assert s["identified_w_allow_mps"] == pytest.approx(0.749, abs=0.15) and "VRS onset from the probe" in md
+    else:
+        assert s["identify_message"] and s["identify_message"] in md
+    assert all(f["outcome"] == "completed" and f["guard_aborts"] == 0 for f in s["flights"])

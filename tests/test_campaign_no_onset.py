@@ -259,3 +259,33 @@ def test_older_campaign_records_with_an_onset_still_summarise(tmp_path):
     s = known_summary(CampaignState.open(tmp_path / "c", "x500"), load_profile("x500"))
     assert s["onset_found"] is True and s["identified_w_allow_mps"] == 0.9 and s["w_onset_lower_bound_mps"] is None
     assert s["probe_log"] is None and math.isclose(s["v_h_mps"], load_profile("x500").v_h_mps)
+
+
+@pytest.mark.parametrize(("w0", "unc", "kept"), [(0.80, 0.21, True), (0.55, 0.15, False)])
+def test_an_onset_identify_refuses_keeps_the_prior_only_where_its_band_reaches_it(env, tmp_path, monkeypatch,
+                                                                                  w0, unc, kept):  # fmt: skip
+    # the sih_quadx fake's probe: onset 0.74 ± 0.19 m/s, refused at 25 % uncertainty, the prior 0.75 inside
+    # its band → keep the prior and go on; an onset refused well below the prior → the step fails
+    from flighttest.analysis import identify
+
+    def refused(log, profile):
+        raise identify.ImplausibleOnset(f"onset {w0} ± {unc} refused", w0, unc, ("its uncertainty is too large",))
+
+    monkeypatch.setattr(identify, "identify_onset", refused)
+    root = _campaign(tmp_path / "campaign", "quiet")
+    prior = load_profile("x500").w_allow_mps
+    rc, out, err = env(root, "--only", "identify", "--json")
+    rec = _steps(root)["identify"]
+    s = json.loads(out)
+    if kept:
+        assert rc == 0 and rec["status"] == "done", err
+        o = rec["outputs"]
+        assert o["onset_found"] is False and o["w_onset_mps"] is None and o["w_onset_lower_bound_mps"] is None
+        assert o["message"] == identify.untrusted_onset_line(identify.ImplausibleOnset("", w0, unc, (
+            "its uncertainty is too large",)), prior)
+        assert f"w_allow stays at prior {prior:.3f} m/s" in o["message"]
+        assert s["identify_message"] == o["message"]
+        assert load_profile(root / "vehicles" / "x500.toml").w_allow_mps == pytest.approx(prior)
+    else:
+        assert rc != 0 and rec["status"] == "failed" and "refused" in rec["error"]
+        assert s["failed_step"] == "identify"

@@ -102,7 +102,25 @@ class NotAProbe(FlighttestError):
 
 
 class ImplausibleOnset(FlighttestError):
-    """The fit found a rise the model cannot explain as a VRS onset for this vehicle: nothing to store."""
+    """The fit found a rise the model cannot explain as a VRS onset for this vehicle: nothing to store.
+    ``w_onset_mps`` ± ``uncertainty_mps``: what the fit found; ``reasons``: why it is refused."""
+
+    def __init__(self, message: str, w_onset_mps: float = math.nan, uncertainty_mps: float = math.nan,
+                 reasons: tuple[str, ...] = ()) -> None:  # fmt: skip
+        super().__init__(message)
+        self.w_onset_mps, self.uncertainty_mps, self.reasons = w_onset_mps, uncertainty_mps, reasons
+
+    def agrees_with(self, w_allow_mps: float) -> bool:
+        """The refused onset's own band reaches ``w_allow_mps`` (or beyond): the probe does not say it
+        is lower."""
+        return math.isfinite(self.w_onset_mps + self.uncertainty_mps) and \
+            self.w_onset_mps + self.uncertainty_mps >= w_allow_mps  # fmt: skip
+
+
+def untrusted_onset_line(bad: ImplausibleOnset, prior_mps: float) -> str:
+    """What the campaign says when the probe's onset is refused but does not contradict the prior."""
+    return (f"the probe's onset {bad.w_onset_mps:.3f} ± {bad.uncertainty_mps:.3f} m/s is not trusted "
+            f"({'; '.join(bad.reasons)}): w_allow stays at prior {prior_mps:.3f} m/s, inside that band")  # fmt: skip
 
 
 class NoOnset(FlighttestError):
@@ -447,7 +465,8 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     why = implausible(w0, unc, profile, float(grid[0]))
     if why:
         raise ImplausibleOnset(f"{log.name}: onset {w0:.3f} ± {unc:.3f} m/s is not a plausible VRS onset for "
-                               f"{profile.name}: " + "; ".join(why) + " (nothing stored)")  # fmt: skip
+                               f"{profile.name}: " + "; ".join(why) + " (nothing stored)",
+                               w0, unc, tuple(why))  # fmt: skip
     v_h = profile.v_h_mps
     return Onset(
         w_onset_mps=w0,

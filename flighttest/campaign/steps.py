@@ -134,8 +134,8 @@ def _keep_profile(profile: VehicleProfile, target: Path) -> None:
 
 
 def run_identify(ctx: StepContext) -> dict[str, Any]:
+    from flighttest.analysis import identify as idf
     from flighttest.analysis.batch import quiet_numerics
-    from flighttest.analysis.identify import NoOnset, identify_onset, no_onset_line
     from flighttest.analysis.loaders import load_log
 
     profile = load_profile(ctx.vehicle)
@@ -145,15 +145,26 @@ def run_identify(ctx: StepContext) -> dict[str, Any]:
     base = {"probe_log": str(log_dir), "vehicle": profile.name, "prior_w_allow_mps": prior}
     try:
         with quiet_numerics():  # numpy's all-NaN windows of streams a log lacks: nothing to tell the user
-            onset = identify_onset(load_log(log_dir), profile)
-    except NoOnset as none:  # quiet up to the top speed: the onset lies above it; fly by the prior
-        line = no_onset_line(none.lower_bound_mps, prior)
+            onset = idf.identify_onset(load_log(log_dir), profile)
+    except idf.NoOnset as none:  # quiet up to the top speed: the onset lies above it; fly by the prior
+        line = idf.no_onset_line(none.lower_bound_mps, prior)
         _keep_profile(profile, target)
         write_json_atomic(ctx.dir.identify_file, {**base, **none.summary(), "profile": str(target), "message": line})
         return {"onset_found": False, "w_onset_mps": None, "uncertainty_mps": None,
                 "w_onset_lower_bound_mps": none.lower_bound_mps, "prior_w_allow_mps": prior,
                 "profile": str(target), "identify_json": str(ctx.dir.identify_file), "message": line}  # fmt: skip
-    except FlighttestError as exc:  # not a probe's sweep, damaged, too few samples, implausible
+    except idf.ImplausibleOnset as bad:
+        if not bad.agrees_with(prior):  # the probe says the onset may lie below the prior: do not fly on it
+            raise StepFailed(f"cannot identify the onset from the probe's log {log_dir}: {bad}") from None
+        # e.g. a small vehicle's onset known to ±30 % where 25 % is asked: the prior lies in its band
+        line = idf.untrusted_onset_line(bad, prior)
+        _keep_profile(profile, target)
+        write_json_atomic(ctx.dir.identify_file, {**base, "onset_found": False, "refused": str(bad),
+                                                  "profile": str(target), "message": line})  # fmt: skip
+        return {"onset_found": False, "w_onset_mps": None, "uncertainty_mps": None, "w_onset_lower_bound_mps": None,
+                "prior_w_allow_mps": prior, "profile": str(target), "identify_json": str(ctx.dir.identify_file),
+                "message": line}  # fmt: skip
+    except FlighttestError as exc:  # not a probe's sweep, damaged, too few samples
         raise StepFailed(f"cannot identify the onset from the probe's log {log_dir}: {exc}") from None
     write_w_allow(profile, onset.w_onset_mps, onset.provenance(log_dir, "flighttest campaign"), target=target)
     write_json_atomic(ctx.dir.identify_file, {**base, **onset.summary(), "profile": str(target)})

@@ -66,6 +66,8 @@ def campaign_summary(state: CampaignState, profile: VehicleProfile, rows: dict[s
         # false: the probe stayed quiet up to the lower bound and the flights used the prior w_allow
         "onset_found": found,
         "w_onset_lower_bound_mps": ident.get("w_onset_lower_bound_mps"),
+        # what identify said where it kept the prior (no onset, or an onset it did not trust)
+        "identify_message": ident.get("message"),
         "identified_profile": str(profile_path) if profile_path else None,
         "vertical_descent_s": vert.get("descent_time_s"),
         "helix_descent_s": helix.get("descent_time_s"),
@@ -107,6 +109,8 @@ def headlines(s: dict) -> list[str]:
         first = (f"no onset found up to {bound:.2f} m/s ({bound / s['v_h_mps']:.3f} v_h; v_h {s['v_h_mps']:.2f} m/s): "
                  f"w_allow kept at the prior {cell(s, 'prior_w_allow_mps', '{:.3f}')} m/s, which the plans and "
                  "the guard used")  # fmt: skip
+    elif s.get("onset_found") is False and s.get("identify_message"):
+        first = f"{s['identify_message']}; the plans and the guard used the prior"
     else:
         first = (f"VRS onset from the probe: {cell(s, 'identified_w_allow_mps', '{:.3f}')} ± "
                  f"{cell(s, 'identified_uncertainty_mps', '{:.3f}')} m/s "
@@ -165,7 +169,7 @@ def write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict
 
 
 def _write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dict[str, Any]:
-    from flighttest.analysis.identify import NoOnset, identify_onset
+    from flighttest.analysis.identify import ImplausibleOnset, NoOnset, identify_onset
     from flighttest.analysis.loaders import load_log
     from flighttest.analysis.pipeline import analyse
     from flighttest.analysis.report import write_report
@@ -189,8 +193,9 @@ def _write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dic
     pd.DataFrame([rows[s] for s in DESCENTS]).to_csv(out_dir / "compare.csv", index=False)
     onsets = {}
     if "probe" in analyses:
-        # no onset: the probe's plot says "no onset identified up to …", the summary that the prior was kept
-        with contextlib.suppress(NoOnset):
+        # no onset, or one not trusted: the probe's plot says "no onset identified", the summary that the
+        # prior was kept
+        with contextlib.suppress(NoOnset, ImplausibleOnset):
             onsets[str(analyses["probe"].log.path)] = identify_onset(analyses["probe"].log, profile)
     write_report(list(analyses.values()), out_dir, onsets)
     plot_tracks_velocity_space(analyses["vertical"], analyses["helix"], out_dir / "velocity_space.png",
