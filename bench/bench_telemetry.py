@@ -420,9 +420,9 @@ async def _fly_phases(traj_path: Path, seconds: float, mode: str, tmp: Path) -> 
     await link._start_subscriptions()
     streamer = SetpointStreamer(_FakeOffboard(), log, 50.0, here=lambda: (0.0, 0.0, -link.state.alt_m))
     runner.streamer = streamer
-    link.on_posvel.append(runner._on_posvel)
+    link.on_posvel.append(runner.watch.on_posvel)
     link.on_attitude.append(runner.guard.note_state_sample)
-    link.on_imu.append(runner._on_imu)
+    link.on_imu.append(runner.watch.on_imu)
     writes: dict[str, list[float]] = {k: [] for k in ("guard", "setpoint", "event", "flush_if_due")}
     for name, sink in writes.items():
         _timed(log, name, sink)
@@ -430,7 +430,7 @@ async def _fly_phases(traj_path: Path, seconds: float, mode: str, tmp: Path) -> 
     stop = threading.Event()
     emitter = threading.Thread(target=_emitter, args=(tel, vstate, stop, recorder.port), daemon=True)
     emitter.start()
-    ticker_task = asyncio.create_task(runner._stale_ticker())
+    ticker_task = asyncio.create_task(runner.watch.stale_ticker())
     loop = asyncio.get_running_loop()
     probe_iv: list[tuple[float, float]] = []
 

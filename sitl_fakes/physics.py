@@ -24,8 +24,11 @@ ROT_DAMPING_NM_PER_RADPS = 0.025
 ROTOR_LAYOUT = ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0))
 
 
-def rotate_body_to_ned(qw, qx, qy, qz, bx, by, bz):
-    """``R(q) v_b`` for one vector, plain floats."""
+def rotate_body_to_ned(
+    bx: float, by: float, bz: float, qw: float, qx: float, qy: float, qz: float
+) -> tuple[float, float, float]:
+    """``R(q) v_b`` for one vector, plain floats. Vector first, then the quaternion (w, x, y, z): the
+    order of every rotation helper, flighttest's (``flighttest.model.frames``) and the fake's alike."""
     tx = 2.0 * (qy * bz - qz * by)
     ty = 2.0 * (qz * bx - qx * bz)
     tz = 2.0 * (qx * by - qy * bx)
@@ -36,9 +39,11 @@ def rotate_body_to_ned(qw, qx, qy, qz, bx, by, bz):
     )
 
 
-def rotate_ned_to_body(qw, qx, qy, qz, vn, ve, vd):
-    """``R(q)ᵀ v_ned`` for one vector, plain floats."""
-    return rotate_body_to_ned(qw, -qx, -qy, -qz, vn, ve, vd)
+def rotate_ned_to_body(
+    vn: float, ve: float, vd: float, qw: float, qx: float, qy: float, qz: float
+) -> tuple[float, float, float]:
+    """``R(q)ᵀ v_ned`` for one vector, plain floats (vector first, then the quaternion)."""
+    return rotate_body_to_ned(vn, ve, vd, qw, -qx, -qy, -qz)
 
 
 @dataclass
@@ -103,7 +108,7 @@ class QuadBody:
         total = t1 + t2 + t3 + t4
 
         qw, qx, qy, qz = s.qw, s.qx, s.qy, s.qz
-        fn, fe, fd = rotate_body_to_ned(qw, qx, qy, qz, 0.0, 0.0, -total)
+        fn, fe, fd = rotate_body_to_ned(0.0, 0.0, -total, qw, qx, qy, qz)
         van, vae, vad = s.vn_mps - wind_ned[0], s.ve_mps - wind_ned[1], s.vd_mps - wind_ned[2]
         c = self.drag_n_per_mps
         m = self.mass_kg

@@ -228,7 +228,7 @@ class Telemetry:
     def odometry(self):
         s = self.v.est
         # PX4 sends pose in LOCAL_NED and velocity in the body frame (child frame BODY_FRD)
-        bx, by, bz = rotate_ned_to_body(s.qw, s.qx, s.qy, s.qz, s.vn_mps, s.ve_mps, s.vd_mps)
+        bx, by, bz = rotate_ned_to_body(s.vn_mps, s.ve_mps, s.vd_mps, s.qw, s.qx, s.qy, s.qz)
         nan21 = [math.nan] * 21
         return M.MAVLink_odometry_message(
             self.boot_us(), M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_BODY_FRD, s.n_m, s.e_m, s.d_m,
@@ -286,7 +286,7 @@ class Telemetry:
     def highres_imu(self):
         s = self.v.body.state
         # specific force in body axes: acceleration minus gravity, rotated
-        fx, fy, fz = rotate_ned_to_body(s.qw, s.qx, s.qy, s.qz, s.an_mps2, s.ae_mps2, s.ad_mps2 - G_MPS2)
+        fx, fy, fz = rotate_ned_to_body(s.an_mps2, s.ae_mps2, s.ad_mps2 - G_MPS2, s.qw, s.qx, s.qy, s.qz)
         return M.MAVLink_highres_imu_message(
             self.boot_us(), fx, fy, fz, s.p_radps, s.q_radps, s.r_radps, 0.21, 0.01, 0.42,
             1013.25 - (-s.d_m) * 0.12, 0.0, -s.d_m, 25.0, 0x1FFF,

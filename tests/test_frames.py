@@ -1,5 +1,6 @@
 """The blade-frame test the guard uses: known states and properties (CONVENTIONS §1-2)."""
 
+import inspect
 import math
 
 import numpy as np
@@ -7,6 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import sitl_fakes.disturbance
+import sitl_fakes.physics
+from flighttest.flying import guard
 from flighttest.model import frames
 from flighttest.model.frames import GuardRegion
 
@@ -27,6 +31,82 @@ def test_rotation_matches_matrix():
     np.testing.assert_allclose(frames.ned_to_body(*v, *q), r.T @ v, atol=1e-12)
     np.testing.assert_allclose(frames.body_to_ned(*v, *q), r @ v, atol=1e-12)
     np.testing.assert_allclose(np.array(frames.quat_to_euler(q)), [0.3, -0.2, 1.1], atol=1e-12)
+
+
+C45 = math.sqrt(0.5)
+YAW_90 = (C45, 0.0, 0.0, C45)  # nose east
+ROLL_90 = (C45, C45, 0.0, 0.0)  # right wing down
+
+
+# every helper that rotates a vector: (callable, the names its vector's three components go by, how
+# many parameters come before them, whether a wind follows the quaternion)
+ROTATION_HELPERS = [
+    (frames.ned_to_body, ("vn", "ve", "vd"), 0, False),
+    (frames.body_to_ned, ("bx", "by", "bz"), 0, False),
+    (frames.blade_velocity_mps, ("vn", "ve", "vd"), 0, True),
+    (GuardRegion.check, ("vn", "ve", "vd"), 1, True),  # after self
+    (sitl_fakes.physics.rotate_body_to_ned, ("bx", "by", "bz"), 0, False),
+    (sitl_fakes.physics.rotate_ned_to_body, ("vn", "ve", "vd"), 0, False),
+    (sitl_fakes.disturbance.blade_velocity_mps, ("vn", "ve", "vd"), 0, True),
+    (sitl_fakes.disturbance.Disturbance.step, ("vn", "ve", "vd"), 2, True),  # after self, dt_s
+]
+
+
+@pytest.mark.parametrize(
+    ("helper", "vector", "skip", "wind"),
+    ROTATION_HELPERS,
+    ids=[f"{h.__module__}.{h.__qualname__}" for h, *_ in ROTATION_HELPERS],
+)
+def test_every_rotation_helper_takes_the_vector_then_the_quaternion_then_the_wind(helper, vector, skip, wind):
+    names = list(inspect.signature(helper).parameters)[skip:]
+    expected = [*vector, "qw", "qx", "qy", "qz", *(("wn", "we", "wd") if wind else ())]
+    assert names == expected, f"{helper.__module__}.{helper.__qualname__}{inspect.signature(helper)}"
+
+
+def test_the_planned_attitude_helper_keeps_the_order_and_refuses_the_old_one():
+    # the commanded acceleration stands where the quaternion does, the wind after it
+    names = list(inspect.signature(guard.predicted_blade_velocity_mps).parameters)
+    assert names == ["vn", "ve", "vd", "an_cmd", "ae_cmd", "ad_cmd", "wn", "we", "wd", "horizon_s"]
+    # ten positional arguments were (v, wind, a_cmd, horizon): now refused, not silently swapped
+    with pytest.raises(TypeError):
+        guard.predicted_blade_velocity_mps(0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    # rising air (updraft 1 m/s) under a level disk, no acceleration: 1 m/s through the disk; with
+    # the wind taken for the acceleration it would read 0
+    w, u = guard.predicted_blade_velocity_mps(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, horizon_s=0.0)
+    assert (w, u) == pytest.approx((1.0, 0.0))
+
+
+ROTATE_CASES = [
+    # (quaternion, body vector, the same vector in NED), worked by hand: yaw 90° turns body x (nose)
+    # to east and body y (right) to south; roll 90° turns body y to down and body z to west
+    (YAW_90, (1.0, 2.0, 3.0), (-2.0, 1.0, 3.0)),
+    (ROLL_90, (1.0, 2.0, 3.0), (1.0, -3.0, 2.0)),
+]
+
+
+@pytest.mark.parametrize(("q", "body", "ned"), ROTATE_CASES)
+@pytest.mark.parametrize(
+    ("to_ned", "to_body"),
+    [
+        (frames.body_to_ned, frames.ned_to_body),
+        (sitl_fakes.physics.rotate_body_to_ned, sitl_fakes.physics.rotate_ned_to_body),
+    ],
+    ids=["flighttest", "fake"],
+)
+def test_rotations_with_a_known_answer(to_ned, to_body, q, body, ned):
+    """Seven floats either way round: only a known answer tells a swapped order (or a conjugated
+    quaternion) from the right one."""
+    np.testing.assert_allclose(to_ned(*body, *q), ned, atol=1e-12)
+    np.testing.assert_allclose(to_body(*ned, *q), body, atol=1e-12)
+
+
+@pytest.mark.parametrize("blade", [frames.blade_velocity_mps, sitl_fakes.disturbance.blade_velocity_mps])
+def test_blade_velocity_with_a_known_answer(blade):
+    # rolled 90° (right wing down, body z pointing west), flying east at 2 m/s with a 0.5 m/s east
+    # wind: 1.5 m/s through the air along −z_body, as in a climb, so the air flows down through the
+    # disk (w = −1.5) and none of it across
+    w, u = blade(0.0, 2.0, 0.0, *ROLL_90, 0.0, 0.5, 0.0)
+    assert float(w) == pytest.approx(-1.5) and float(u) == pytest.approx(0.0, abs=1e-12)
 
 
 def test_px4_convention_pitch():

@@ -88,7 +88,7 @@ def test_predicted_blade_velocity_matches_the_region_test_for_level_hover_comman
     # zero commanded acceleration ⇒ level disk ⇒ same w, u as GuardRegion.check with a level quaternion
     rng = np.random.default_rng(1)
     for vn, ve, vd in rng.normal(0, 3, (20, 3)):
-        w, u = g.predicted_blade_velocity_mps(vn, ve, vd, 0, 0, 0, 0, 0, 0, 0.2)
+        w, u = g.predicted_blade_velocity_mps(vn, ve, vd, 0, 0, 0, horizon_s=0.2)
         _, w_ref, u_ref, _ = REGION.check(vn, ve, vd, *LEVEL)
         assert w == pytest.approx(w_ref, abs=1e-9) and u == pytest.approx(u_ref, abs=1e-9)
 
@@ -96,7 +96,7 @@ def test_predicted_blade_velocity_matches_the_region_test_for_level_hover_comman
 def test_predicted_tilt_follows_commanded_acceleration():
     # commanded 2 m/s² north at constant height: disk tilted forward by atan(2/g); flying north at
     # 3 m/s puts air through the disk from below-front: w = −3·sin(tilt) (< 0: not descending)
-    w, u = g.predicted_blade_velocity_mps(3.0, 0, 0, 0, 0, 0, 2.0, 0, 0, 0.0)
+    w, u = g.predicted_blade_velocity_mps(3.0, 0, 0, 2.0, 0, 0, horizon_s=0.0)
     tilt = math.atan2(2.0, 9.80665)
     assert w == pytest.approx(-3.0 * math.sin(tilt))
     assert u == pytest.approx(3.0 * math.cos(tilt))

@@ -213,16 +213,16 @@ def test_the_runner_times_the_descent_with_the_same_rule(tmp_path):
     t, n, e, d, vd = _descent_trace()
     end = (0.0, 0.0, -2.0)
     runner.phase, runner.t_stream_start = "stream", 100.0
-    runner.descent_timer = dt.DescentTimer(100.0, end)
+    runner.watch.descent_timer = dt.DescentTimer(100.0, end)
     st = runner.link.state
     for k in range(len(t)):
         st.n_m, st.e_m, st.d_m, st.vd_mps, st.vn_mps, st.ve_mps = n[k], e[k], d[k], vd[k], 0.0, 0.0
-        runner._on_posvel(100.0 + t[k])
+        runner.watch.on_posvel(100.0 + t[k])
     want = dt.descent_reached(t, n, e, d, vd, 0.0, end)
     assert runner.descent_time_s == pytest.approx(want.descent_time_s)
-    assert runner.horizontal_error_m == pytest.approx(want.horizontal_error_m)
+    assert runner.watch.horizontal_error_m == pytest.approx(want.horizontal_error_m)
     s = runner._outcome("completed", None).summary()
-    assert s["descent_time_s"] == runner.descent_time_s and s["horizontal_error_m"] == runner.horizontal_error_m
+    assert s["descent_time_s"] == runner.descent_time_s and s["horizontal_error_m"] == runner.watch.horizontal_error_m
     ev = [x for x in _events_of(runner) if x["event"] == "descent_reached"]
     assert len(ev) == 1 and ev[0]["horizontal_error_m"] == round(want.horizontal_error_m, 3)
 
@@ -231,14 +231,15 @@ def test_the_ladder_labels_its_phases_once_per_rung(tmp_path):
     runner = _runner(tmp_path)
     runner.phase = "stream"
     for phase in ("abort_recover", "abort_hold", "abort_land", "abort_land"):  # Land is re-sent
-        runner._ladder_phase(phase)
+        runner.ladder_run.log_phase(phase)
     assert runner.phase == "stream"  # the nominal flow's phase: where it aborted (phase_at_end)
     phases = [(x["phase"], x["nominal_phase"]) for x in _events_of(runner) if x["event"] == "phase"]
     assert phases == [("abort_recover", "stream"), ("abort_hold", "stream"), ("abort_land", "stream")]
 
 
 def test_final_mode_is_the_mode_at_disarm(tmp_path):
-    from flighttest.flying.runner import MODE_SETTLE_S, final_mode
+    from flighttest.flying.outcome import final_mode
+    from flighttest.flying.watch import MODE_SETTLE_S
 
     assert final_mode("OFFBOARD", False, "LAND") == {
         "final_mode": "LAND", "final_mode_note": "at disarm; OFFBOARD reported after disarming"}  # fmt: skip
@@ -250,15 +251,15 @@ def test_final_mode_is_the_mode_at_disarm(tmp_path):
     st = runner.link.state
     st.n_m = st.e_m = st.vn_mps = st.ve_mps = st.vd_mps = 0.0
     st.d_m = -1.0
-    runner._on_mode("OFFBOARD", "LAND")
+    runner.watch.on_mode("OFFBOARD", "LAND")
     st.flight_mode = "LAND"
     time.sleep(MODE_SETTLE_S + 0.02)
-    runner._on_posvel(time.monotonic())
-    runner._on_mode("LAND", "OFFBOARD")
+    runner.watch.on_posvel(time.monotonic())
+    runner.watch.on_mode("LAND", "OFFBOARD")
     st.flight_mode = "OFFBOARD"
-    runner._on_posvel(time.monotonic())  # the mode arrived before the armed flag: not counted
+    runner.watch.on_posvel(time.monotonic())  # the mode arrived before the armed flag: not counted
     st.armed = False
-    runner._on_posvel(time.monotonic())
+    runner.watch.on_posvel(time.monotonic())
     s = runner._outcome("completed", None).summary()
     assert s["final_mode"] == "LAND" and s["final_armed"] is False and "OFFBOARD" in s["final_mode_note"]
 

@@ -16,7 +16,6 @@ import json
 import math
 import re
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -28,6 +27,7 @@ from flighttest.flying.log_writer import FlightLogWriter
 from flighttest.flying.missions_config import MissionConfig, load_mission_config, mission_config_from_dict
 from flighttest.flying.pauses import FlightCollector
 from flighttest.model.profiles import load_profile
+from sitl_fakes.virtual_time import run_virtual
 
 X500 = load_profile("x500")
 PX4_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "px4_sih"
@@ -268,45 +268,40 @@ def _runner(tmp_path: Path, **guard) -> ms.MissionRunner:
     return runner
 
 
-def _tick(runner: ms.MissionRunner, monkeypatch, state, pos, phases: dict[float, str], until: float) -> list[dict]:
-    """Run the runner's ``_stale_ticker`` on a virtual clock: samples (``state``, ``pos``) reach the
-    guard as the clock passes them, ``phases`` (time → phase) are set as it passes them. The events
-    it logged, in order."""
-    clock = SimpleNamespace(t=0.0)
-    arrivals = sorted([(t, False) for t in state] + [(t, True) for t in pos])
-    changes = sorted(phases.items())
-    real_sleep = asyncio.sleep
+def _tick(runner: ms.MissionRunner, state, pos, phases: dict[float, str], until: float) -> list[dict]:
+    """Run the runner's ``_stale_ticker`` on a virtual clock (``sitl_fakes.virtual_time``, from 0):
+    samples (``state``, ``pos``) reach the guard at their times, ``phases`` (time → phase) are set at
+    theirs. The events it logged, in order."""
 
-    async def sleep(dt: float) -> None:
-        clock.t += dt
-        while arrivals and arrivals[0][0] <= clock.t:
-            t, is_posvel = arrivals.pop(0)
-            runner.guard.note_state_sample(t)
-            if is_posvel:
-                runner.guard.last_velocity_t = t
-        while changes and changes[0][0] <= clock.t:
-            runner.phase = changes.pop(0)[1]
-            runner.guard.armed = runner.phase not in ("land", "preflight")
-        if clock.t > until:
-            raise asyncio.CancelledError
-        await real_sleep(0)
+    def arrive(t: float, is_posvel: bool) -> None:
+        runner.guard.note_state_sample(t)
+        if is_posvel:
+            runner.guard.last_velocity_t = t
 
-    monkeypatch.setattr(ms, "asyncio", SimpleNamespace(sleep=sleep, CancelledError=asyncio.CancelledError))
-    monkeypatch.setattr(ms, "time", SimpleNamespace(monotonic=lambda: clock.t))
+    def enter(phase: str) -> None:
+        runner.phase = phase
+        runner.guard.armed = phase not in ("land", "preflight")
 
     async def main() -> None:
-        task = asyncio.get_running_loop().create_task(runner._stale_ticker())
+        loop = asyncio.get_running_loop()
+        for t in state:
+            loop.call_at(t, arrive, t, t in pos_set)
+        for t, phase in phases.items():
+            loop.call_at(t, enter, phase)
+        task = loop.create_task(runner.watch.stale_ticker())
+        loop.call_at(until, task.cancel)
         await asyncio.gather(task, return_exceptions=True)
 
-    asyncio.run(main())
+    pos_set = set(pos.tolist())
+    run_virtual(main(), start_s=0.0)
     runner.log.close()
     return [json.loads(line) for line in (runner.log.dir / "events.jsonl").read_text().splitlines()]
 
 
-def test_the_ticker_aborts_a_dead_link_mid_stream_at_recover(tmp_path, monkeypatch):
+def test_the_ticker_aborts_a_dead_link_mid_stream_at_recover(tmp_path):
     runner = _runner(tmp_path)
     state, pos = _link(0.0, 3.0)
-    events = _tick(runner, monkeypatch, state, pos, {0.0: "settle", 1.0: "stream"}, 4.0)
+    events = _tick(runner, state, pos, {0.0: "settle", 1.0: "stream"}, 4.0)
     aborts = [e for e in events if e["event"] == "abort"]
     assert len(aborts) == 1 and aborts[0]["phase"] == "stream" and aborts[0]["rung"] == "RECOVER"
     assert runner.abort_verdict == g.STALE
@@ -318,10 +313,10 @@ def test_the_ticker_aborts_a_dead_link_mid_stream_at_recover(tmp_path, monkeypat
     assert gaps["settle"] == pytest.approx(10.0, abs=0.5)
 
 
-def test_the_ticker_logs_a_gap_in_takeoff_once_and_flies_on(tmp_path, monkeypatch):
+def test_the_ticker_logs_a_gap_in_takeoff_once_and_flies_on(tmp_path):
     runner = _runner(tmp_path)
     state, pos = _link(0.0, 6.0, {2.0: 0.3, 2.6: 0.4, 4.0: 0.150})
-    events = _tick(runner, monkeypatch, state, pos, {0.0: "takeoff", 5.0: "climb"}, 6.0)
+    events = _tick(runner, state, pos, {0.0: "takeoff", 5.0: "climb"}, 6.0)
     assert not runner.ladder.active and not [e for e in events if e["event"] == "abort"]
     noted = [e for e in events if e["event"] == "stale_while_takeoff"]
     assert len(noted) == 2  # one per gap over 0.25 s; the 150 ms one is below even that
@@ -330,29 +325,29 @@ def test_the_ticker_logs_a_gap_in_takeoff_once_and_flies_on(tmp_path, monkeypatc
     assert gaps["takeoff"] == pytest.approx(400.0, abs=11.0)
 
 
-def test_the_ticker_hands_a_long_gap_while_landing_to_the_ladders_land(tmp_path, monkeypatch):
+def test_the_ticker_hands_a_long_gap_while_landing_to_the_ladders_land(tmp_path):
     runner = _runner(tmp_path)
     state, pos = _link(0.0, 2.0)
-    events = _tick(runner, monkeypatch, state, pos, {0.0: "land"}, 4.0)
+    events = _tick(runner, state, pos, {0.0: "land"}, 4.0)
     assert [e["event"] for e in events].count("stale_while_landing") == 1
     aborts = [e for e in events if e["event"] == "abort"]
     assert len(aborts) == 1 and aborts[0]["rung"] == "LAND" and "(> 1000 ms)" in aborts[0]["reason"]
 
 
-def test_the_ticker_leaves_staleness_to_the_ladder_once_it_runs(tmp_path, monkeypatch):
+def test_the_ticker_leaves_staleness_to_the_ladder_once_it_runs(tmp_path):
     runner = _runner(tmp_path)
     runner.ladder.trigger(0.0, "an earlier abort")
     state, pos = _link(0.0, 1.0)
-    events = _tick(runner, monkeypatch, state, pos, {0.0: "stream"}, 3.0)
+    events = _tick(runner, state, pos, {0.0: "stream"}, 3.0)
     assert not [e for e in events if e["event"] in ("abort", "stale_while_stream")]
     assert runner.ladder.reason == "an earlier abort"
 
 
-def test_a_config_in_periods_flies_its_periods(tmp_path, monkeypatch):
+def test_a_config_in_periods_flies_its_periods(tmp_path):
     runner = _runner(tmp_path, stale_periods=15.0)  # the CI allowance: 0.3 s
     assert runner.limits.stale_after_s == pytest.approx(0.3)
     state, pos = _link(0.0, 2.0, {1.0: 0.28})
-    events = _tick(runner, monkeypatch, state, pos, {0.0: "stream"}, 3.0)
+    events = _tick(runner, state, pos, {0.0: "stream"}, 3.0)
     aborts = [e for e in events if e["event"] == "abort"]
     assert len(aborts) == 1 and "(> 300 ms)" in aborts[0]["reason"]  # the dead link at 2 s, not the gap
 
@@ -451,14 +446,14 @@ def test_maybe_collect_runs_a_young_collection_past_the_limit(collector_state):
 def test_the_runner_freezes_holds_off_and_restores_with_its_log(tmp_path, collector_state):
     gc.enable()
     runner = _runner(tmp_path)
-    runner._freeze_heap()
+    runner.pauses.freeze()
     assert gc.isenabled() and gc.get_freeze_count() > 0
-    runner._hold_off_collector()
+    runner.pauses.hold_off()
     assert not gc.isenabled()
-    runner._collect_now()
-    runner._restore_collector()
-    runner._restore_collector()  # every exit calls it: twice is harmless
-    assert gc.isenabled() and gc.get_freeze_count() == 0 and runner._collector is None
+    runner.pauses.safe_point()
+    runner.pauses.restore()
+    runner.pauses.restore()  # every exit calls it: twice is harmless
+    assert gc.isenabled() and gc.get_freeze_count() == 0
     runner.log.close()
     events = [json.loads(line) for line in (runner.log.dir / "events.jsonl").read_text().splitlines()]
     whats = [e["what"] for e in events if e["event"] == "gc"]

@@ -20,6 +20,11 @@ averaged over a centred window of ``window_s`` to tame its chi-square scatter, a
 ``(w − w0)₊²`` is averaged over the same window, so the window smears model and data alike and
 does not bias ``w0``. ``w`` is the blade-frame, air-relative descent speed the guard uses.
 
+``P`` is one of flighttest's three fluctuation measures and stays its own (the live guard's std
+about a trailing line would smear the rise over its half-second window and is not gamma-like;
+:mod:`flighttest.analysis.fluctuation` sets the three side by side); ``tests/test_fluctuation_tie.py``
+holds its onset to the live guard's and the post-flight metric's on one signal.
+
 The fit is a gamma GLM with identity link (a windowed mean of squares is gamma-like: its scatter
 grows with its mean), by iteratively reweighted least squares for each ``w0`` on a grid of
 ``step_mps``, keeping the ``w0`` of least deviance. Only the probe's own samples are used: from a

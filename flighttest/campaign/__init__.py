@@ -13,6 +13,8 @@ run again alone::
     DIR/report/                summary.md, summary.json, compare.csv, report.md and the PNG figures
     DIR/sim/                   with --sim: the fake vehicle's ground-truth logs
 
-``state`` holds the folder and its record, ``steps`` what each step does, ``figures`` the comparison
-plots; the command (prompts, progress, the fake vehicle) is ``flighttest.cli.campaign``.
+``state`` holds the folder and its record (the step statuses: ``StepStatus``), ``steps`` what each step
+does, ``run`` the loop that runs and resumes them (``Campaign``: the fake vehicle, Ctrl-C, the record kept
+whatever ends a step), ``summary`` and ``figures`` the report; the command (arguments, the console, the
+prompts, the printed summary) is ``flighttest.cli.campaign``.
 """

@@ -6,12 +6,34 @@ import json
 import math
 import time
 from dataclasses import asdict, dataclass, field, fields
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
 from flighttest.errors import FlighttestError
 from flighttest.flying.log_writer import write_json_atomic
 from flighttest.inputs import MAX_JSON_BYTES, InputFileError, read_text_file, shown
+
+
+class StepStatus(StrEnum):
+    """A step's ``status`` in ``campaign.json`` (docs/CONTRACTS.md, "Campaign step statuses"). A ``str``:
+    the record and ``campaign --json`` carry the bare value, and it compares equal to it."""
+
+    PENDING = "pending"  # not run, or made stale by an earlier step run again
+    RUNNING = "running"  # begun; left so only when the process died inside the step
+    DONE = "done"  # finished; its outputs are what later steps read
+    FAILED = "failed"  # ended by an error (StepFailed: with the outputs it had, e.g. the aborted flight's log)
+    INTERRUPTED = "interrupted"  # ended by the operator's Ctrl-C inside the step
+
+
+class CampaignOutcome(StrEnum):
+    """How a ``flighttest campaign`` run ended early: ``outcome`` in its ``--json`` document."""
+
+    REFUSED = "refused"  # bad input or a refused operation (exit code 2)
+    FAILED = "failed"  # a step failed, or an unexpected error (exit code 1)
+    INTERRUPTED = "interrupted"  # Ctrl-C (exit code 130)
+    STOPPED = "stopped"  # the operator said no before a step (exit code 1)
+
 
 STEPS = ("probe", "identify", "plan", "vertical", "helix", "report")
 FLIGHT_STEPS = frozenset({"probe", "vertical", "helix"})
@@ -77,7 +99,7 @@ class CampaignDir:
 
 @dataclass
 class StepRecord:
-    status: str = "pending"  # pending | running | done | failed | interrupted
+    status: StepStatus = StepStatus.PENDING
     started_unix_s: float | None = None
     elapsed_s: float | None = None
     outputs: dict[str, Any] = field(default_factory=dict)
@@ -124,12 +146,12 @@ class CampaignState:
         })  # fmt: skip
 
     def done(self, step: str) -> bool:
-        return self.steps[step].status == "done"
+        return self.steps[step].status == StepStatus.DONE
 
     def output(self, step: str, key: str) -> Any:
         """An earlier step's output; a missing one is one error line saying which step to run."""
         rec = self.steps[step]
-        if rec.status != "done" or key not in rec.outputs:
+        if rec.status != StepStatus.DONE or key not in rec.outputs:
             raise FlighttestError(f"step '{step}' has not completed in {self.dir.root}: run it first (--only {step})")
         return rec.outputs[key]
 
@@ -165,7 +187,7 @@ class CampaignState:
         """Mark ``steps`` pending before a run that redoes them in order: a later step flown with an earlier
         step's old files must not count as done if this run stops half-way."""
         for s in steps:
-            if self.steps[s].status != "pending":
+            if self.steps[s].status != StepStatus.PENDING:
                 self.steps[s] = StepRecord()
 
     def check_needs(self, steps: list[str]) -> None:
@@ -181,12 +203,13 @@ class CampaignState:
                 )
 
     def begin(self, step: str) -> None:
-        self.steps[step] = StepRecord(status="running", started_unix_s=time.time())
+        self.steps[step] = StepRecord(status=StepStatus.RUNNING, started_unix_s=time.time())
         self.save()
 
-    def finish(self, step: str, status: str, outputs: dict[str, Any] | None = None, error: str | None = None) -> None:
+    def finish(self, step: str, status: StepStatus | str, outputs: dict[str, Any] | None = None,
+               error: str | None = None) -> None:  # fmt: skip
         rec = self.steps[step]
-        rec.status = status
+        rec.status = StepStatus(status)  # a bare "done" too; anything else is a bug, refused here
         rec.elapsed_s = round(time.time() - (rec.started_unix_s or time.time()), 3)
         rec.outputs = {k: self._relative(v) if k in PATH_KEYS else v for k, v in (outputs or {}).items()}
         rec.error = error
@@ -195,7 +218,7 @@ class CampaignState:
 
 # -- reading campaign.json: every field of its documented type (docs/CONTRACTS.md), or one line ----------
 
-STATUSES = ("pending", "running", "done", "failed", "interrupted")
+STATUSES = tuple(StepStatus)
 _NUMBER_KEYS = frozenset({"guard_aborts", "speedup_helix_vs_vertical"})
 
 
@@ -251,8 +274,8 @@ def _parse_record(raw: Any, where: Path) -> tuple[str, float, dict[str, StepReco
         for key in rec:
             if key not in known:
                 raise bad(f"step '{name}': unknown key {shown(key)}")
-        status = rec.get("status", "pending")
-        if status not in STATUSES:
+        status = rec.get("status", StepStatus.PENDING)
+        if not isinstance(status, str) or status not in STATUSES:
             raise bad(f"step '{name}': status must be one of {', '.join(STATUSES)} (got {shown(status)})")
         for key in ("started_unix_s", "elapsed_s"):
             if rec.get(key) is not None and not _is_number(rec[key]):
@@ -269,6 +292,6 @@ def _parse_record(raw: Any, where: Path) -> tuple[str, float, dict[str, StepReco
         error = rec.get("error")
         if error is not None and not isinstance(error, str):
             raise bad(f"step '{name}': 'error' must be text (got {shown(error)})")
-        steps[name] = StepRecord(status=status, started_unix_s=rec.get("started_unix_s"),
+        steps[name] = StepRecord(status=StepStatus(status), started_unix_s=rec.get("started_unix_s"),
                                  elapsed_s=rec.get("elapsed_s"), outputs=dict(outputs), error=error)  # fmt: skip
     return vehicle, float(created), steps

@@ -24,11 +24,14 @@ from flighttest.errors import FlighttestError
 from flighttest.flying.log_writer import write_json_atomic
 from flighttest.flying.mission_scripts import MISSIONS, load_mission_module, mission_config_path
 from flighttest.flying.missions_config import DESCENT_KEYS, MissionConfig, load_mission_config
+from flighttest.flying.outcome import Outcome
 from flighttest.inputs import atomic_write
 from flighttest.model.profiles import VehicleProfile, load_profile, profile_to_dict, write_w_allow
 from flighttest.model.trajectory import Trajectory
 
-FLIGHT_OK = {"probe": ("probe_stopped", "completed"), "vertical": ("completed",), "helix": ("completed",)}
+# the outcomes that make a flight step done (docs/CONTRACTS.md, "Flight outcomes and phases")
+FLIGHT_OK = {"probe": (Outcome.PROBE_STOPPED, Outcome.COMPLETED), "vertical": (Outcome.COMPLETED,),
+             "helix": (Outcome.COMPLETED,)}  # fmt: skip
 
 
 class StepFailed(FlighttestError):

@@ -20,27 +20,24 @@ files of the earlier ones (e.g. --only plan after editing DIR/config/helix_desce
 from __future__ import annotations
 
 import argparse
-import contextlib
 import datetime as dt
 import math
-import signal
 import sys
-import time
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from rich.console import Console
 from rich.table import Table
 
-from flighttest.campaign.state import FLIGHT_STEPS, STEPS, TITLES, CampaignState
+from flighttest.campaign.state import FLIGHT_STEPS, STEPS, CampaignOutcome
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
 from flighttest.inputs import Range, shown
 
 if TYPE_CHECKING:
-    from flighttest.model.profiles import VehicleProfile
+    from pathlib import Path
 
-SIM_DEFAULT_PARAMS = {"MPC_Z_VEL_MAX_DN": 3.0}  # rehearsal: let offboard descents through unclipped
+    from rich.console import Console
+
+    from flighttest.campaign.run import Campaign, SimOptions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -97,9 +94,11 @@ STALE_PERIODS = Range(1.0, 50.0, "telemetry periods")
 SEED = Range(0, 2**32 - 1, integer=True)  # what the fake's random generator takes
 
 
-def _validate(args: argparse.Namespace) -> dict[str, Any]:
-    """Every input checked before the fake starts or anything connects; returns the fake's options."""
+def _validate(args: argparse.Namespace) -> SimOptions | None:
+    """Every input checked before the fake starts or anything connects; returns the fake's options
+    (None with --connect)."""
     from flighttest import inputs as ip
+    from flighttest.campaign.run import SIM_DEFAULT_PARAMS, SimOptions
     from flighttest.flying.link import check_connection, check_url
 
     if args.connect:
@@ -122,14 +121,9 @@ def _validate(args: argparse.Namespace) -> dict[str, Any]:
         params[name] = value
     if args.connect:
         check_connection(args.connect)  # last: a host name may take a moment to resolve
-    opts: dict[str, Any] = {"param": params}
-    if args.truth_onset is not None:
-        opts["truth_onset"] = args.truth_onset
-    if args.sim_wind:
-        opts["wind_ned"] = tuple(args.sim_wind)
-    if args.sim_seed is not None:
-        opts["seed"] = args.sim_seed
-    return opts
+        return None
+    wind = tuple(args.sim_wind) if args.sim_wind else None
+    return SimOptions(truth_onset_mps=args.truth_onset, wind_ned_mps=wind, seed=args.sim_seed, params=params)
 
 
 def _output_dir(text: str | Path) -> Path:
@@ -162,11 +156,6 @@ def _sim_param(item: str) -> tuple[str, float]:
     return name, number
 
 
-def _clock(seconds: float) -> str:
-    m, s = divmod(round(seconds), 60)
-    return f"{m:d}:{s:02d}"
-
-
 class CampaignFailed(FlighttestError):
     """An unexpected error inside a step: one line (the step is marked failed in campaign.json)."""
 
@@ -179,150 +168,79 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     before anything started (``{"error", "outcome", "out_dir"}``)."""
     from flighttest.cli.fly import json_failure
 
-    known: dict[str, Any] = {}  # the campaign's state, profile and step in progress, once steps begin
+    campaign: Campaign | None = None  # once open: a stop after its record is written prints the summary so far
     try:
-        return _campaign(args, known)
+        campaign = _open(args)
+        return _run(args, campaign)
     except FlighttestError as exc:
-        if _json_stop(args, known, str(exc), "refused" if exc.exit_code == 2 else "failed"):
+        outcome = CampaignOutcome.REFUSED if exc.exit_code == 2 else CampaignOutcome.FAILED
+        if _json_stop(args, campaign, str(exc), outcome):
             exc.json_printed = True  # type: ignore[attr-defined]
         json_failure(exc, args.json, out_dir=str(args.output))
         raise
     except KeyboardInterrupt:
-        if args.json and not _json_stop(args, known, "interrupted by the operator", "interrupted"):
-            print_json({"error": "interrupted by the operator", "outcome": "interrupted", "out_dir": str(args.output)})
+        error = "interrupted by the operator"
+        if args.json and not _json_stop(args, campaign, error, CampaignOutcome.INTERRUPTED):
+            print_json({"error": error, "outcome": CampaignOutcome.INTERRUPTED, "out_dir": str(args.output)})
         raise
     except Exception as exc:  # a bug or a library's surprise: one line, the details in campaign.json
         err = CampaignFailed(f"campaign stopped by an unexpected error: {type(exc).__name__}: {exc}")
-        if _json_stop(args, known, str(err), "failed"):
+        if _json_stop(args, campaign, str(err), CampaignOutcome.FAILED):
             err.json_printed = True  # type: ignore[attr-defined]
         json_failure(err, args.json, out_dir=str(args.output))
         raise err from exc
 
 
-def _json_stop(args: argparse.Namespace, known: dict[str, Any], error: str, outcome: str) -> bool:
+def _json_stop(args: argparse.Namespace, campaign: Campaign | None, error: str, outcome: CampaignOutcome) -> bool:
     """With ``--json`` once steps have begun: print the summary so far with the failure; False when
     there is nothing to summarise yet (the caller prints the refusal)."""
-    if not args.json or "state" not in known:
+    if not args.json or campaign is None or not campaign.started:
         return False
-    from flighttest.campaign.summary import known_summary
-
     try:
-        doc = known_summary(known["state"], known["profile"])
+        doc = campaign.summary_so_far()
     except Exception as exc:  # the summary must never hide the failure it reports
         doc = {"out_dir": str(args.output), "summary_error": f"{type(exc).__name__}: {exc}"}
-    doc.update(error=error, outcome=outcome, failed_step=known.get("step"))
+    doc.update(error=error, outcome=outcome, failed_step=campaign.current_step)
     print_json(doc)
     return True
 
 
-def _campaign(args: argparse.Namespace, known: dict[str, Any]) -> int:
-    from flighttest.campaign.steps import RUNNERS, StepContext, StepFailed, write_configs
-    from flighttest.cli.fly import confirm_go
+def _open(args: argparse.Namespace) -> Campaign:
+    """The campaign the arguments ask for, every input checked before anything is written or connects
+    (arguments and link first, then the profile, the folder and its record: one error line for the first)."""
+    from flighttest.campaign.run import Campaign, CampaignRequest
     from flighttest.model.profiles import load_profile
 
-    sim_opts = _validate(args)
+    sim = _validate(args)
     vehicle = args.vehicle or "x500"
     profile = load_profile(vehicle)
-    state = CampaignState.open(_output_dir(args.output), profile.name)
-    steps = state.to_run(args.only, args.start)
-    state.check_needs(steps)
+    request = CampaignRequest(out_dir=_output_dir(args.output), vehicle=vehicle, connect=args.connect, sim=sim,
+                              only=args.only, start=args.start, yes=args.yes, stale_periods=args.stale_periods,
+                              show_panel=_out(args).is_terminal and not args.json)  # fmt: skip
+    campaign = Campaign.open(request, profile)
     # refused before anything is written: a campaign that cannot start leaves no folder behind
-    if steps and not args.yes and not sys.stdin.isatty():
+    if campaign.steps and not args.yes and not sys.stdin.isatty():
         raise FlighttestError("no terminal to confirm each step: pass --yes to run the campaign unattended")
-    write_configs(state.dir)
-    out = err_console if args.json else console
-    state.save()
-    known.update(state=state, profile=profile, step=None)
-
-    with contextlib.ExitStack() as stack:
-        link: dict[str, str] = {}
-
-        def connect() -> str:
-            if "url" not in link:
-                if args.sim:
-                    link["url"] = _start_fake(stack, state, profile.name, sim_opts, out)
-                else:
-                    link["url"] = args.connect
-            return link["url"]
-
-        ctx = StepContext(state=state, vehicle=vehicle, connect=connect, yes=args.yes,
-                          stale_periods=args.stale_periods, show_panel=out.is_terminal and not args.json,
-                          confirm=confirm_go, print_fn=out.print)  # fmt: skip
-        t0 = time.monotonic()
-        stop: list[str] = []  # a Ctrl-C during a ground step: finish it, then stop
-        out.rule(f"[bold]flighttest campaign — {profile.name} — {state.dir.root}")
-        if not steps:
-            out.print("every step is done (use --only STEP or --from STEP to run one again)")
-        for k, step in enumerate(steps):
-            nxt = steps[k + 1] if k + 1 < len(steps) else "the summary"
-            out.rule(f"[bold]step {STEPS.index(step) + 1}/{len(STEPS)}: {step}[/] — {TITLES[step]}", align="left")
-            out.print(f"[dim]campaign time {_clock(time.monotonic() - t0)}; after this: {nxt}[/]")
-            if not args.yes and not _ask(step):
-                out.print(f"stopped before '{step}'. Run the same command again to go on from here.")
-                _json_stop(args, known, f"stopped before '{step}' by the operator", "stopped")
-                return 1
-            if not args.only:
-                state.invalidate(steps[k + 1:])
-            ground = step not in FLIGHT_STEPS  # a flight handles Ctrl-C itself: its abort ladder
-            # a ground step's Ctrl-C handler is in place before campaign.json says it is running
-            stop_after = _stop_after_step(stop, out) if ground else contextlib.nullcontext()
-            try:
-                with stop_after:
-                    state.begin(step)
-                    known["step"] = step
-                    if ground:
-                        with out.status(f"{step}: {TITLES[step]} …"):
-                            outputs = RUNNERS[step](ctx)
-                    else:
-                        outputs = RUNNERS[step](ctx)
-            except KeyboardInterrupt:
-                state.finish(step, "interrupted", error="interrupted by the operator")
-                out.print(f"[yellow]interrupted during '{step}'[/]; run the same command again to resume from it")
-                raise
-            except StepFailed as exc:
-                state.finish(step, "failed", outputs=exc.outputs, error=str(exc))
-                out.print(f"[red]{step} failed[/]: {exc}")
-                out.print("fix the cause, then run the same command again to resume from this step")
-                raise
-            except BaseException as exc:
-                state.finish(step, "failed", error=str(exc) or type(exc).__name__)
-                raise
-            state.finish(step, "done", outputs)
-            known["step"] = None
-            out.print(f"[green]✓ {step}[/] in {_clock(state.steps[step].elapsed_s or 0)}  {_brief(step, outputs)}")
-            if stop and k + 1 < len(steps):
-                out.print(f"[yellow]stopped after '{step}' (Ctrl-C)[/]; run the same command again to go on")
-                raise KeyboardInterrupt
-    return _final(state, args.json, out, profile)
+    return campaign
 
 
-@contextlib.contextmanager
-def _stop_after_step(stop: list[str], out: Console):
-    """Ctrl-C (or SIGTERM) during a ground step asks to stop after it (IPOPT, inside the planner, would
-    swallow the interrupt and go on anyway); a second one stops at once."""
-
-    def on_sigint(signum, frame) -> None:
-        if stop:
-            raise KeyboardInterrupt
-        stop.append("sigint")
-        out.print("[yellow]Ctrl-C: stopping after this step (Ctrl-C again: at once)[/]")
-
-    previous = {sig: signal.signal(sig, on_sigint) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+def _out(args: argparse.Namespace) -> Console:
+    """Progress goes to stderr under --json: stdout holds the JSON only."""
+    return err_console if args.json else console
 
 
-def _start_fake(stack: contextlib.ExitStack, state: CampaignState, vehicle: str, opts: dict, out: Console) -> str:
-    from sitl_fakes.launcher import FakeVehicle
+def _run(args: argparse.Namespace, campaign: Campaign) -> int:
+    from flighttest.campaign.run import CampaignHooks
+    from flighttest.cli.fly import confirm_go
 
-    state.dir.sim.mkdir(parents=True, exist_ok=True)
-    truth = state.dir.sim / f"truth-{dt.datetime.now():%Y%m%d-%H%M%S}.csv"
-    fake = stack.enter_context(FakeVehicle(vehicle=vehicle, truth_log=truth, **opts))
-    out.print(f"fake vehicle: {fake.url} (ground truth: {truth})")
-    return fake.url
+    out = _out(args)
+    hooks = CampaignHooks(say=out.print, heading=out.rule, step_heading=lambda text: out.rule(text, align="left"),
+                          busy=out.status, ask_step=None if args.yes else _ask, confirm_flight=confirm_go)  # fmt: skip
+    result = campaign.run(hooks)
+    if result.stopped_before:
+        _json_stop(args, campaign, f"stopped before '{result.stopped_before}' by the operator", CampaignOutcome.STOPPED)
+        return 1
+    return _final(campaign, args.json, out)
 
 
 def _ask(step: str) -> bool:
@@ -331,34 +249,19 @@ def _ask(step: str) -> bool:
     return Confirm.ask(f"[bold]go on with '{step}'?[/]", default=step not in FLIGHT_STEPS)
 
 
-def _brief(step: str, o: dict[str, Any]) -> str:
-    if step in FLIGHT_STEPS:
-        d = o.get("descent_time_s")
-        return f"{o['outcome']}" + (f", descent {d:.2f} s" if d else "") + f"; log {o['log_dir']}"
-    if step == "identify":
-        if o.get("onset_found") is False:
-            return f"{o['message']} → {o['profile']}"
-        return f"VRS onset {o['w_onset_mps']:.3f} ± {o['uncertainty_mps']:.3f} m/s → {o['profile']}"
-    if step == "plan":
-        return f"vertical {o['vertical_t_f_s']:.2f} s, helix {o['helix_t_f_s']:.2f} s planned"
-    if step == "report":
-        return f"{o['report_dir']}"
-    return ""
+def _final(campaign: Campaign, as_json: bool, out: Console) -> int:
+    from flighttest.campaign.run import clock_text
+    from flighttest.campaign.summary import headlines, table_rows
 
-
-def _final(state: CampaignState, as_json: bool, out: Console, profile: VehicleProfile) -> int:
-    from flighttest.campaign.summary import headlines, known_summary, read_summary, table_rows
-
+    state = campaign.state
     if not state.done("report"):
-        status = {s: state.steps[s].status for s in STEPS}
         if as_json:  # the summary so far: its keys, what campaign.json knows, and each step's status
-            print_json(known_summary(state, profile))
+            print_json(campaign.summary_so_far())
         else:
-            out.print("steps: " + ", ".join(f"{s} {v}" for s, v in status.items()))
+            out.print("steps: " + ", ".join(f"{s} {state.steps[s].status}" for s in STEPS))
             out.print("no report yet: run the campaign again (without --only) to finish")
         return 0
-    summary = read_summary(state.dir.report)
-    summary["steps_elapsed_s"] = {s: state.steps[s].elapsed_s for s in STEPS}
+    summary = campaign.summary()
     if as_json:
         print_json(summary)
         return 0
@@ -371,7 +274,7 @@ def _final(state: CampaignState, as_json: bool, out: Console, profile: VehiclePr
     out.print(t)
     for line in headlines(summary):
         out.print(line)
-    took = ", ".join(f"{s} {_clock(v)}" for s, v in summary["steps_elapsed_s"].items() if v is not None)
+    took = ", ".join(f"{s} {clock_text(v)}" for s, v in summary["steps_elapsed_s"].items() if v is not None)
     out.print(f"[dim]step times: {took}[/]")
     out.print(f"report: [bold]{state.dir.report / 'summary.md'}[/]")
     return 0

@@ -227,14 +227,16 @@ def confirm_go(pre) -> bool:
 
 
 def run_request(req, as_json: bool) -> int:
+    from flighttest.flying.outcome import Outcome
     from flighttest.flying.runner import fly
 
     out = asyncio.run(fly(req))
     summary = out.summary()
     if as_json:
-        print_json({**summary, "error": out.abort_reason} if out.outcome == "refused" else summary)
+        print_json({**summary, "error": out.abort_reason} if out.outcome == Outcome.REFUSED else summary)
     else:
-        colour = {"completed": "green", "dry_run": "green", "probe_stopped": "yellow"}.get(out.outcome, "red")
+        colour = {Outcome.COMPLETED: "green", Outcome.DRY_RUN: "green", Outcome.PROBE_STOPPED: "yellow"}.get(
+            out.outcome, "red")
         line = f"[{colour}]{out.outcome}[/]"
         if out.abort_reason:
             line += f": {out.abort_reason}"
@@ -245,7 +247,7 @@ def run_request(req, as_json: bool) -> int:
         console.print(line)
         if out.log_dir:
             console.print(f"log: {out.log_dir}")
-    if out.outcome == "refused":
+    if out.outcome == Outcome.REFUSED:
         exc = FlighttestError(out.abort_reason or "refused")
         exc.json_printed = as_json  # type: ignore[attr-defined]  (stdout already holds the summary)
         raise exc

@@ -3,6 +3,10 @@
 Every command writes ``PATH.csv`` + ``PATH.json`` (``flighttest.model.trajectory``), prints a rich
 summary (or ``--json``), and can draw a PNG (``--plot``). A solve that does not converge is
 reported with its status and best point, writes nothing, and exits with code 1.
+
+This module only parses options and reports: each command hands typed values to the planner's
+builder of its kind (``flighttest.planner.problems``), solves, and passes the trajectory and what to
+say about it to the one tail that validates, writes, plots and prints (``_write_and_report``).
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -137,15 +142,6 @@ def _phi_bound(text: str) -> float | str:
     return "free" if text.strip().lower() == "free" else ip.ROLL_BOUND_DEG(text)
 
 
-def _constraint(args: argparse.Namespace, profile: VehicleProfile, paper: bool):
-    from flighttest.planner.cone import VelocityConstraint
-
-    kind = args.constraint or "cone"
-    margin = args.margin if args.margin is not None else (0.0 if paper else profile.vrs.margin_mps)
-    w_allow = profile.w_allow_mps if kind == "guard" else 0.0
-    return VelocityConstraint(cone_deg=profile.vrs.cone_deg, w_allow_mps=w_allow, margin_mps=margin)
-
-
 def _out_path(args: argparse.Namespace, default: str) -> Path:
     """The output stem, its two files and the plot checked before anything is solved: a plan that
     cannot be written is not computed (``-o ''`` or a path under a file is one line, not a traceback)."""
@@ -163,7 +159,7 @@ def _out_path(args: argparse.Namespace, default: str) -> Path:
     return Path(stem)
 
 
-def _save(traj, args, out: Path) -> Path:
+def _save(traj, out: Path) -> Path:
     try:
         csv_path, _ = traj.save(out)
     except OSError as exc:
@@ -171,14 +167,46 @@ def _save(traj, args, out: Path) -> Path:
     return csv_path
 
 
-def _report(args: argparse.Namespace, title: str, data: dict[str, Any], rows: list[tuple[str, str]]) -> None:
-    if args.json:
-        print_json(data)
+def _plot(args, traj, constraint, wind=(0.0, 0.0, 0.0)) -> str | None:
+    if args.plot is None:
+        return None
+    from flighttest.planner.plot import plot_trajectory
+
+    try:
+        return str(plot_trajectory(traj, args.plot, constraint, wind))
+    except OSError as exc:
+        raise FlighttestError(f"--plot {args.plot}: cannot write ({exc.strerror or exc})") from None
+
+
+@dataclass
+class _Summary:
+    """What a command reports about its plan, besides the files it wrote (``_write_and_report``)."""
+
+    title: str
+    status: str
+    t_f_s: float
+    solve_s: float
+    fields: dict[str, Any]  # JSON keys after status, t_f_s, solve_s, path and plot
+    rows: list[tuple[str, str]]  # table rows before the trajectory and plot rows
+
+
+def _write_and_report(args: argparse.Namespace, traj, out_stem: Path, summary: _Summary, constraint,
+                      wind: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                      validate_for: VehicleProfile | None = None) -> None:  # fmt: skip
+    """The tail every command shares: check the trajectory against the vehicle (``validate_for``),
+    write it, draw it (``--plot``, the ``constraint``'s region in the ``wind``), report it."""
+    if validate_for is not None:
+        traj.validate(validate_for, where="planned trajectory")
+    out = _save(traj, out_stem)
+    plot = _plot(args, traj, constraint, wind)
+    if args.json:  # JSON only: scripts parse stdout
+        print_json({"status": summary.status, "t_f_s": summary.t_f_s, "solve_s": summary.solve_s, "path": str(out),
+                    "plot": plot, **summary.fields})  # fmt: skip
         return
-    table = Table(title=title, show_header=False)
+    table = Table(title=summary.title, show_header=False)
     table.add_column("", style="bold")
     table.add_column("")
-    for k, v in rows:
+    for k, v in [*summary.rows, ("trajectory", str(out)), *([("plot", plot)] if plot else [])]:
         table.add_row(k, v)
     console.print(table)
 
@@ -204,84 +232,48 @@ def _failed(args: argparse.Namespace, kind: str, sol) -> int:
     return SOLVER_FAILED
 
 
-def _plot(args, traj, constraint, wind=(0.0, 0.0, 0.0)) -> str | None:
-    if args.plot is None:
-        return None
-    from flighttest.planner.plot import plot_trajectory
-
-    try:
-        return str(plot_trajectory(traj, args.plot, constraint, wind))
-    except OSError as exc:
-        raise FlighttestError(f"--plot {args.plot}: cannot write ({exc.strerror or exc})") from None
-
-
 # -- commands ----------------------------------------------------------------------------------------
 
 
 def cmd_planar(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
     from flighttest.planner.cases import table_case
     from flighttest.planner.export import planar_trajectory
-    from flighttest.planner.planar import PlanarProblem, solve_planar
+    from flighttest.planner.planar import solve_planar
+    from flighttest.planner.problems import planar_problem
 
     profile = load_profile(args.vehicle)
     if args.f_min is not None and args.f_max is not None and args.f_min >= args.f_max:
         raise FlighttestError(f"--f-min ({args.f_min:g}) must be below --f-max ({args.f_max:g})")
-    phi_bound: float | str | None = "unset"
-    if args.phi_bound is not None:
-        phi_bound = None if args.phi_bound == "free" else math.radians(args.phi_bound)
-    paper = args.case is not None
-    constraint = _constraint(args, profile, paper)
-    if paper:
-        case = table_case(args.case)
-        p = case.problem
-        default_name = f"planar-case{args.case}"
-    else:
-        case = None
-        n = profile.n_rotors
-        p = PlanarProblem(
-            f_min_mps2=n * profile.min_thrust_per_rotor_n / profile.mass_kg,
-            f_max_mps2=0.9 * n * profile.max_thrust_per_rotor_n / profile.mass_kg,
-            phi_bound_rad=math.radians(profile.max_tilt_deg),
-            omega_max_rps=math.radians(profile.max_rate_dps[0]),
-            v_bound_mps=profile.max_speed_mps,
-        )
-        default_name = f"planar-{profile.name}-{args.height:g}m"
-    out_stem = _out_path(args, default_name)
-    overrides: dict[str, Any] = {"constraint": constraint, "n_intervals": args.intervals,
-                                 "n_coarse": max(10, args.intervals // 2)}  # fmt: skip
-    for arg, field in (("height", "height_m"), ("y_bound", "y_bound_m"), ("y_final", "y_final"),
-                       ("omega_max", "omega_max_rps"), ("f_min", "f_min_mps2"), ("f_max", "f_max_mps2"),
-                       ("v_bound", "v_bound_mps")):  # fmt: skip
-        val = getattr(args, arg)
-        if val is not None and not (paper and arg == "height" and val == 5.0):
-            overrides[field] = val
-    if phi_bound != "unset":
-        overrides["phi_bound_rad"] = phi_bound
-    if args.wind:
-        overrides["wind_y_mps"], overrides["wind_z_mps"] = args.wind
-    p = replace(p, **overrides)
-    p = replace(p, z_bound_m=max(p.z_bound_m, p.height_m))
+    case = table_case(args.case) if args.case is not None else None
+    out_stem = _out_path(args, f"planar-case{args.case}" if case else f"planar-{profile.name}-{args.height:g}m")
+    wind_y, wind_z = args.wind if args.wind else (0.0, 0.0)
+    free = args.phi_bound == "free"
+    p = planar_problem(
+        profile,
+        args.case,
+        constraint_kind=args.constraint or "cone",
+        margin_mps=args.margin,
+        height_m=args.height,
+        y_bound_m=args.y_bound,
+        y_final=args.y_final,
+        phi_bound_deg=None if free else args.phi_bound,
+        flips=free,
+        omega_max_rps=args.omega_max,
+        f_min_mps2=args.f_min,
+        f_max_mps2=args.f_max,
+        v_bound_mps=args.v_bound,
+        wind_y_mps=wind_y,
+        wind_z_mps=wind_z,
+        n_intervals=args.intervals,
+    )
     sol = solve_planar(p, verbose=args.verbose)
     if not sol.success:
         return _failed(args, "planar", sol)
-    extra = {}
-    if case is not None:
-        extra = {"table_case": case.number, "paper_t_f_s": case.paper_t_f_s}
-    traj = planar_trajectory(sol, profile.name, profile.mass_kg, extra)
-    if not paper:
-        traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, out_stem)
-    plot = _plot(args, traj, p.constraint, (0.0, p.wind_y_mps, p.wind_z_mps))
+    meta = {"table_case": case.number, "paper_t_f_s": case.paper_t_f_s} if case else {}
+    traj = planar_trajectory(sol, profile.name, profile.mass_kg, meta)
     man = sol.manoeuvre()
     x = sol.result.x
-    data = {
-        "status": sol.status,
-        "t_f_s": sol.t_f_s,
-        "solve_s": sol.solve_s,
-        "path": str(out),
-        "plot": plot,
+    fields = {
         "case": args.case,
         "paper_t_f_s": case.paper_t_f_s if case else None,
         "manoeuvre": man["label"],
@@ -299,59 +291,50 @@ def cmd_planar(args: argparse.Namespace) -> int:
         ("optimal time", f"{sol.t_f_s:.3f} s" + (f"  (paper {case.paper_t_f_s:.2f} s)" if case else "")),
         ("solve time", f"{sol.solve_s:.2f} s ({len(sol.attempts)} solves)"),
         ("manoeuvre", man["label"]),
-        ("max |Y| / final Y", f"{data['max_abs_y_m']:.2f} m / {data['final_y_m']:.2f} m"),
-        ("max |φ|", f"{data['max_abs_phi_deg']:.1f}°"),
-        ("min f_coll", f"{data['min_f_coll_mps2']:.2f} m/s²"),
+        ("max |Y| / final Y", f"{fields['max_abs_y_m']:.2f} m / {fields['final_y_m']:.2f} m"),
+        ("max |φ|", f"{fields['max_abs_phi_deg']:.1f}°"),
+        ("min f_coll", f"{fields['min_f_coll_mps2']:.2f} m/s²"),
         ("constraint", f"{p.constraint.name}, margin {p.constraint.margin_mps:g} m/s"),
         (
             "worst margin (1 kHz re-sim)",
             f"{sol.check['worst_margin_mps']:+.4f} m/s at t={sol.check['worst_margin_t_s']:.2f} s",
         ),
-        ("trajectory", str(out)),
     ]
-    if plot:
-        rows.append(("plot", plot))
-    title = f"planar descent (Table II case {args.case})" if paper else f"planar descent ({profile.name})"
-    _report(args, title, data, rows)
+    title = f"planar descent (Table II case {args.case})" if case else f"planar descent ({profile.name})"
+    summary = _Summary(title, sol.status, sol.t_f_s, sol.solve_s, fields, rows)
+    # Table II's bounds are the paper's, not a vehicle's (its thrust goes negative): not checked against one
+    _write_and_report(args, traj, out_stem, summary, p.constraint, (0.0, p.wind_y_mps, p.wind_z_mps),
+                      validate_for=None if case else profile)  # fmt: skip
     return 0
 
 
 def cmd_helix(args: argparse.Namespace) -> int:
     from flighttest.planner.export import helix_trajectory
-    from flighttest.planner.helix import problem_for_vehicle, solve_helix
+    from flighttest.planner.helix import solve_helix
+    from flighttest.planner.problems import helix_problem
 
     profile = load_profile(args.vehicle)
     out_stem = _out_path(args, f"helix-{profile.name}-{args.height:g}m-r{args.radius:g}")
     wind = tuple(args.wind) if args.wind else (0.0, 0.0, 0.0)
-    end = tuple(args.end) if args.end else (0.0, 0.0)
-    constraint = _constraint(args, profile, paper=False)
-    p = problem_for_vehicle(
+    p = helix_problem(
         profile,
         height_m=args.height,
         radius_m=args.radius,
-        constraint=constraint,
+        constraint_kind=args.constraint or "cone",
+        margin_mps=args.margin,
         thrust_fraction=args.thrust_fraction,
         tilt_max_deg=args.tilt_max,
         rate_max_dps=args.rate_max,
         wind_ned_mps=wind,
-        end_ne_m=end,
+        end_ne_m=tuple(args.end) if args.end else (0.0, 0.0),
         n_intervals=args.intervals,
-        n_coarse=max(10, args.intervals // 2),
     )
     sol = solve_helix(p, verbose=args.verbose)
     if not sol.success:
         return _failed(args, "helix", sol)
     traj = helix_trajectory(sol, profile.name, profile.mass_kg)
-    traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, out_stem)
-    plot = _plot(args, traj, constraint, wind)
     c = sol.check
-    data = {
-        "status": sol.status,
-        "t_f_s": sol.t_f_s,
-        "solve_s": sol.solve_s,
-        "path": str(out),
-        "plot": plot,
+    fields = {
         "vehicle": profile.name,
         "turns": c["turns"],
         "max_radius_m": c["max_radius_m"],
@@ -368,36 +351,25 @@ def cmd_helix(args: argparse.Namespace) -> int:
         ("turns", f"{c['turns']:.2f}"),
         ("max radius", f"{c['max_radius_m']:.2f} m (bound {args.radius:g})"),
         ("max tilt", f"{c['max_tilt_deg']:.1f}°"),
-        ("constraint", f"{constraint.name}, margin {constraint.margin_mps:g} m/s"),
+        ("constraint", f"{p.constraint.name}, margin {p.constraint.margin_mps:g} m/s"),
         ("worst margin (1 kHz re-sim)", f"{c['worst_margin_mps']:+.4f} m/s"),
-        ("trajectory", str(out)),
     ]
-    if plot:
-        rows.append(("plot", plot))
-    _report(args, f"3D descent ({profile.name})", data, rows)
+    summary = _Summary(f"3D descent ({profile.name})", sol.status, sol.t_f_s, sol.solve_s, fields, rows)
+    _write_and_report(args, traj, out_stem, summary, p.constraint, wind, validate_for=profile)
     return 0
 
 
 def cmd_vertical(args: argparse.Namespace) -> int:
-    from flighttest.planner.cone import VelocityConstraint
     from flighttest.planner.export import vertical_trajectory
-    from flighttest.planner.vertical import plan_vertical
+    from flighttest.planner.problems import vertical_constraint, vertical_plan
 
     profile = load_profile(args.vehicle)
     out_stem = _out_path(args, f"vertical-{profile.name}-{args.height:g}m")
-    margin = (profile.vrs.margin_mps if args.margin is None else args.margin) + args.extra_margin
-    plan = plan_vertical(profile, args.height, args.w_allow, margin, args.accel_fraction)
+    plan = vertical_plan(profile, args.height, w_allow_mps=args.w_allow, margin_mps=args.margin,
+                         extra_margin_mps=args.extra_margin, accel_fraction=args.accel_fraction)  # fmt: skip
     traj = vertical_trajectory(plan, profile.name, profile.mass_kg)
-    traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, out_stem)
     w_allow = plan.problem["w_allow_mps"]
-    plot = _plot(args, traj, VelocityConstraint(profile.vrs.cone_deg, w_allow, plan.problem["margin_mps"]))
-    data = {
-        "status": "closed_form",
-        "t_f_s": plan.t_f_s,
-        "solve_s": 0.0,
-        "path": str(out),
-        "plot": plot,
+    fields = {
         "cruise_mps": plan.cruise_mps,
         "w_allow_mps": w_allow,
         "a_down_mps2": plan.a_down_mps2,
@@ -408,58 +380,54 @@ def cmd_vertical(args: argparse.Namespace) -> int:
         ("duration", f"{plan.t_f_s:.2f} s for {args.height:g} m"),
         ("cruise", f"{plan.cruise_mps:.3f} m/s (w_allow {w_allow:.3f} m/s)"),
         ("accel down / up", f"{plan.a_down_mps2:.2f} / {plan.a_up_mps2:.2f} m/s²"),
-        ("trajectory", str(out)),
     ]
-    if plot:
-        rows.append(("plot", plot))
-    _report(args, f"vertical baseline ({profile.name})", data, rows)
+    summary = _Summary(f"vertical baseline ({profile.name})", "closed_form", plan.t_f_s, 0.0, fields, rows)
+    _write_and_report(args, traj, out_stem, summary, vertical_constraint(profile, plan), validate_for=profile)
     return 0
 
 
 def cmd_probe(args: argparse.Namespace) -> int:
-    from flighttest.planner.cone import VelocityConstraint
     from flighttest.planner.export import probe_trajectory
-    from flighttest.planner.probe import plan_probe
+    from flighttest.planner.problems import probe_plan, vehicle_constraint
 
     profile = load_profile(args.vehicle)
     out_stem = _out_path(args, f"probe-{profile.name}")
+    # what `flighttest fly probe` flies unless told otherwise: its mission's start height and floor
     fl = load_mission_config(mission_config_path("probe")).flight
     top = args.max_descent_speed if args.max_descent_speed is not None else PROBE.top_speed_mps(profile.w_allow_mps)
-    start = args.start_alt if args.start_alt is not None else fl.start_height_m
-    floor = args.floor if args.floor is not None else fl.min_alt_m
-    plan = plan_probe(args.amplitude, args.omega0, args.ramp, top, args.duration, start, floor, args.speed_step,
-                      max_accel_down_mps2=PROBE.accel_fraction * profile.max_accel_down_mps2,
-                      max_accel_up_mps2=PROBE.accel_fraction * profile.max_accel_up_mps2)  # fmt: skip
+    plan = probe_plan(
+        profile,
+        amplitude_m=args.amplitude,
+        omega0_rps2=args.omega0,
+        ramp_s=args.ramp,
+        max_descent_mps=top,
+        duration_s=args.duration,
+        start_alt_m=args.start_alt if args.start_alt is not None else fl.start_height_m,
+        floor_alt_m=args.floor if args.floor is not None else fl.min_alt_m,
+        speed_step_mps=args.speed_step,
+        accel_fraction=PROBE.accel_fraction,
+    )
     traj = probe_trajectory(plan, profile.name, profile.mass_kg)
-    traj.validate(profile, where="planned trajectory")
-    out = _save(traj, args, out_stem)
-    plot = _plot(args, traj, VelocityConstraint(profile.vrs.cone_deg, profile.w_allow_mps, profile.vrs.margin_mps))
-    data = {
-        "status": "closed_form",
-        "t_f_s": plan.t_f_s,
-        "solve_s": 0.0,
-        "path": str(out),
-        "plot": plot,
+    fields = {
         "cycles": plan.cycles,
         "max_descent_mps": plan.max_descent_mps,
         "w_allow_mps": profile.w_allow_mps,
         "speed_first_reached": plan.speed_first_reached,
         "problem": plan.problem,
     }
-    if args.json:
-        print_json(data)
-        return 0
-    _report(args, f"probe reference ({profile.name})", data, [
+    rows = [
         ("duration", f"{plan.t_f_s:.2f} s, {plan.cycles} cycles"),
-        ("max descent speed", f"{plan.max_descent_mps:.2f} m/s (cap {args.max_descent_speed:g})"),
+        ("max descent speed", f"{plan.max_descent_mps:.2f} m/s (cap {top:g})"),
         ("profile w_allow", f"{profile.w_allow_mps:.3f} m/s"),
-        ("trajectory", str(out)),
-        *([("plot", plot)] if plot else []),
-    ])  # fmt: skip
-    t = Table(title="descent speed first reached")
-    t.add_column("speed (m/s)", justify="right")
-    t.add_column("t (s)", justify="right")
-    for row in plan.speed_first_reached[:: max(1, len(plan.speed_first_reached) // 15)]:
-        t.add_row(f"{row['speed_mps']:.2f}", f"{row['t_s']:.2f}")
-    console.print(t)
+    ]
+    summary = _Summary(f"probe reference ({profile.name})", "closed_form", plan.t_f_s, 0.0, fields, rows)
+    # the plot's region is the guard's as `fly probe` flies it (the profile's w_allow and margin)
+    _write_and_report(args, traj, out_stem, summary, vehicle_constraint(profile, "guard"), validate_for=profile)
+    if not args.json:
+        t = Table(title="descent speed first reached")
+        t.add_column("speed (m/s)", justify="right")
+        t.add_column("t (s)", justify="right")
+        for row in plan.speed_first_reached[:: max(1, len(plan.speed_first_reached) // 15)]:
+            t.add_row(f"{row['speed_mps']:.2f}", f"{row['t_s']:.2f}")
+        console.print(t)
     return 0

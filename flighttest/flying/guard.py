@@ -17,6 +17,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+from flighttest.analysis.fluctuation import LIVE_MIN_SAMPLES, LIVE_MIN_SPAN_FRACTION, fluct_threshold, hover_baseline
 from flighttest.model.aero import G_MPS2
 from flighttest.model.frames import GuardRegion
 
@@ -151,12 +152,18 @@ class Decision:
 
 
 def predicted_blade_velocity_mps(
-    vn, ve, vd, wn, we, wd, an_cmd, ae_cmd, ad_cmd, horizon_s: float
-) -> tuple[float, float]:
+    vn: float, ve: float, vd: float, an_cmd: float, ae_cmd: float, ad_cmd: float,
+    wn: float = 0.0, we: float = 0.0, wd: float = 0.0, *, horizon_s: float,
+) -> tuple[float, float]:  # fmt: skip
     """``(w, u)`` of a planned state: velocity advanced by the acceleration, disk tilted as that
     acceleration needs (thrust along −z_body, so ``z_body ∥ g − a``, NED). What the *plan* promises —
     the preflight checks a trajectory with it; the live guard predicts from the vehicle's measured
-    response instead (``Guard``)."""
+    response instead (``Guard``).
+
+    Arguments in the order of every rotation helper (``flighttest.model.frames.blade_velocity_mps``):
+    the velocity, then what sets the attitude (here the commanded acceleration, there the quaternion),
+    then the wind. ``horizon_s`` is keyword-only so that a call written for the order this function
+    once had (wind before the acceleration, ten positional arguments) fails rather than swapping them."""
     van = vn + an_cmd * horizon_s - wn
     vae = ve + ae_cmd * horizon_s - we
     vad = vd + ad_cmd * horizon_s - wd
@@ -178,6 +185,11 @@ class FluctuationDetector:
     the shaking the VRS brings does. The window holds a few tens of samples: recomputing the
     least-squares line on each sample costs microseconds and has none of the cancellation a
     running sum of ``t²`` suffers on a monotonic clock.
+
+    The streaming form of ``flighttest.analysis.fluctuation.trailing_detrended_std``, which defines
+    the measure for a whole series; kept in plain floats because it runs on the event loop for every
+    IMU sample, where numpy's per-call cost is several times the arithmetic (that module's docstring).
+    ``tests/test_fluctuation_tie.py`` feeds both the same samples and requires the same values.
     """
 
     def __init__(self, window_s: float) -> None:
@@ -194,11 +206,10 @@ class FluctuationDetector:
 
     def std(self) -> float:
         n = len(self._buf)
-        if n < 5:
+        if n < LIVE_MIN_SAMPLES:
             return 0.0
         t0, t1 = self._buf[0][0], self._buf[-1][0]
-        # a window spanning less than half its length is not yet a window
-        if t1 - t0 < 0.5 * self.window_s:
+        if t1 - t0 < LIVE_MIN_SPAN_FRACTION * self.window_s:
             return 0.0
         mt = sum(t for t, _ in self._buf) / n - t0
         mx = sum(x for _, x in self._buf) / n
@@ -248,8 +259,8 @@ class Guard:
         """The hover baseline: median window std since ``start_baseline`` (None without samples)."""
         if self._baseline is not None:
             rates, accels = self._baseline
-            self.baseline_rate_std_dps = _median(rates)
-            self.baseline_accel_std_mps2 = _median(accels)
+            self.baseline_rate_std_dps = hover_baseline(rates)
+            self.baseline_accel_std_mps2 = hover_baseline(accels)
             self._baseline = None
         return self.baseline_rate_std_dps, self.baseline_accel_std_mps2
 
@@ -258,9 +269,10 @@ class Guard:
         the absolute limit and ``fluct_ratio`` × baseline (floored); ``None`` = not judged."""
         lim = self.limits
         return (
-            _threshold(lim.max_rate_std_dps, lim.fluct_ratio, self.baseline_rate_std_dps, lim.fluct_min_rate_std_dps),
-            _threshold(lim.max_accel_std_mps2, lim.fluct_ratio, self.baseline_accel_std_mps2,
-                       lim.fluct_min_accel_std_mps2),
+            fluct_threshold(lim.max_rate_std_dps, lim.fluct_ratio, self.baseline_rate_std_dps,
+                            lim.fluct_min_rate_std_dps),
+            fluct_threshold(lim.max_accel_std_mps2, lim.fluct_ratio, self.baseline_accel_std_mps2,
+                            lim.fluct_min_accel_std_mps2),
         )  # fmt: skip
 
     def on_rates(self, t_s: float, p_rps: float, q_rps: float, r_rps: float) -> Decision | None:
@@ -407,21 +419,6 @@ def stale_rung(phase: str) -> Rung:
     if phase in AUTOPILOT_PHASES:
         return Rung.HOLD
     return Rung.RECOVER
-
-
-def _median(values: list[float]) -> float | None:
-    vals = sorted(v for v in values if math.isfinite(v))
-    if not vals:
-        return None
-    k = len(vals) // 2
-    return vals[k] if len(vals) % 2 else 0.5 * (vals[k - 1] + vals[k])
-
-
-def _threshold(absolute: float | None, ratio: float | None, baseline: float | None, floor: float) -> float | None:
-    candidates = [absolute] if absolute is not None else []
-    if ratio is not None and baseline is not None:
-        candidates.append(max(ratio * baseline, floor))
-    return min(candidates) if candidates else None
 
 
 # -- the abort ladder --------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from flighttest.errors import FlighttestError
 
@@ -235,6 +235,37 @@ class TelemetryState:
 Listener = Callable[[float], None]
 
 
+class Link(Protocol):
+    """What the mission runner flies through: ``VehicleLink`` over MAVSDK, or a scripted in-process
+    autopilot (``sitl_fakes.scripted``) on a virtual clock. Listeners get the loop's time of each
+    sample; commands raise ``TimeoutError`` when the vehicle does not answer within ``timeout_s``."""
+
+    state: TelemetryState
+    on_posvel: list[Listener]
+    on_attitude: list[Listener]
+    on_imu: list[Listener]
+    on_mode: list[Callable[[str, str], None]]
+    on_connection: list[Callable[[bool], None]]
+    # False where the loop's clock is virtual: no wall-clock watchdog thread may judge the stream
+    realtime: bool
+
+    async def open(self) -> None: ...
+    async def close(self) -> None: ...
+    async def wait_for(self, predicate: Callable[[TelemetryState], bool], timeout_s: float,
+                       poll_s: float = 0.05) -> bool: ...  # fmt: skip
+    async def arm(self, timeout_s: float, what: str = "arm") -> None: ...
+    async def set_takeoff_altitude(self, alt_m: float, timeout_s: float, what: str = "...") -> None: ...
+    async def takeoff(self, timeout_s: float, what: str = "takeoff") -> None: ...
+    async def land(self, timeout_s: float, what: str = "land") -> None: ...
+    async def hold(self, timeout_s: float, what: str = "hold") -> None: ...
+    async def start_offboard(self, timeout_s: float, what: str = "offboard start") -> None: ...
+    async def stop_offboard(self, timeout_s: float, what: str = "offboard stop") -> None: ...
+    def offboard_setters(self) -> Any: ...
+    async def get_param(self, name: str, kind: str = "float") -> float | int | None: ...
+    async def get_all_params(self, timeout_s: float = 3.0) -> dict[str, float | int]: ...
+    async def autopilot_name(self) -> str | None: ...
+
+
 class VehicleLink:
     """One vehicle through one MAVSDK instance. ``async with VehicleLink(...) as link:``."""
 
@@ -272,6 +303,7 @@ class VehicleLink:
         self.mavsdk_errors: deque[str] = deque(maxlen=3)  # MAVSDK's latest WARN/ERROR lines
         self._log_seen: dict[str, int] = {}
         self._loop: asyncio.AbstractEventLoop | None = None
+        self.realtime = True
 
     # -- lifecycle ---------------------------------------------------------------------------------
     async def __aenter__(self) -> VehicleLink:
@@ -424,6 +456,28 @@ class VehicleLink:
     @property
     def calls_in_flight(self) -> int:
         return len(self._inflight)
+
+    # -- commands: what the runner asks of the vehicle (``VehicleCommands``) --------------------------
+    async def arm(self, timeout_s: float, what: str = "arm") -> None:
+        await self.call(self.action.arm(), what, timeout_s)
+
+    async def set_takeoff_altitude(self, alt_m: float, timeout_s: float, what: str = "set takeoff altitude") -> None:
+        await self.call(self.action.set_takeoff_altitude(alt_m), what, timeout_s)
+
+    async def takeoff(self, timeout_s: float, what: str = "takeoff") -> None:
+        await self.call(self.action.takeoff(), what, timeout_s)
+
+    async def land(self, timeout_s: float, what: str = "land") -> None:
+        await self.call(self.action.land(), what, timeout_s)
+
+    async def hold(self, timeout_s: float, what: str = "hold") -> None:
+        await self.call(self.action.hold(), what, timeout_s)
+
+    async def start_offboard(self, timeout_s: float, what: str = "offboard start") -> None:
+        await self.call(self.offboard.start(), what, timeout_s)
+
+    async def stop_offboard(self, timeout_s: float, what: str = "offboard stop") -> None:
+        await self.call(self.offboard.stop(), what, timeout_s)
 
     # -- subscriptions -------------------------------------------------------------------------------
     async def _start_subscriptions(self) -> None:

@@ -18,6 +18,7 @@ import math
 import os
 import platform
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import IO, Any
@@ -60,7 +61,8 @@ def write_json_atomic(path: Path, data: Any) -> None:
 class FlightLogWriter:
     """The open log folder of one flight. ``t_s`` columns count from ``t0_mono`` (mission start)."""
 
-    def __init__(self, root: Path | str, mission: str, t0_mono: float | None = None) -> None:
+    def __init__(self, root: Path | str, mission: str, t0_mono: float | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:  # fmt: skip
         root = Path(root)
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in mission) or "flight"
@@ -80,8 +82,10 @@ class FlightLogWriter:
 
                 raise FlighttestError(f"cannot create log folder {path} ({exc.strerror})") from None
         self.dir = path
-        self.t0_mono = time.monotonic() if t0_mono is None else t0_mono
-        self.unix0 = time.time() - (time.monotonic() - self.t0_mono)
+        # ``clock`` is the runner's (its event loop's; virtual in the runner's tests): t0 on it, and the
+        # wall time of t0 through it
+        self.t0_mono = clock() if t0_mono is None else t0_mono
+        self.unix0 = time.time() - (clock() - self.t0_mono)
         self._files: list[IO[str]] = []
         self._setpoints = self._open_csv("setpoints.csv", SETPOINT_COLUMNS)
         self._guard = self._open_csv("guard.csv", GUARD_COLUMNS)

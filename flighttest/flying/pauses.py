@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import gc
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -182,3 +183,44 @@ class FlightCollector:
         st.collections[g] = st.collections.get(g, 0) + 1
         st.max_ms[g] = max(st.max_ms.get(g, 0.0), ms)
         st.collected += int(info.get("collected", 0))
+
+
+class FlightPauses:
+    """The collector through one flight, each step logged as a ``gc`` event (``event(name, **fields)``):
+    ``freeze`` once connected, ``hold_off`` before arming, ``safe_point`` where PX4 holds the vehicle,
+    ``tick`` at every stale-ticker period, ``restore`` on every exit."""
+
+    def __init__(self, event: Callable[..., None]) -> None:
+        self._event = event
+        self._collector: FlightCollector | None = None
+
+    def freeze(self) -> None:
+        """Connected, before the preflight: one full collection (a full one of this heap pauses the process
+        for up to a few hundred ms) and everything alive frozen, out of every later collection."""
+        if self._collector is None:
+            self._collector = FlightCollector().__enter__()
+            st = self._collector.stats
+            self._event("gc", what="heap frozen", ms=round(st.entry_ms, 1), frozen=st.frozen)
+
+    def hold_off(self) -> None:
+        """Preflight done, arming next: what it made frozen too, and no automatic collections until the
+        flight is over (only at the safe points)."""
+        if self._collector is not None:
+            ms = self._collector.hold_off()
+            self._event("gc", what="held off", ms=round(ms, 1), frozen=self._collector.stats.frozen)
+
+    def safe_point(self) -> None:
+        """Collect what the flight made so far (the rest is frozen: a few ms)."""
+        if self._collector is not None:
+            self._event("gc", what="safe point", ms=round(self._collector.safe_point(), 2))
+
+    def tick(self) -> None:
+        if self._collector is not None:
+            self._collector.maybe_collect()
+
+    def restore(self) -> None:
+        """Every exit of a flight: the collector as it was before, and what it did meanwhile."""
+        if self._collector is not None:
+            gcx, self._collector = self._collector, None
+            gcx.__exit__(None, None, None)
+            self._event("gc", what="restored", **gcx.stats.to_dict())

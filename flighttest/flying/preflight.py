@@ -106,7 +106,7 @@ def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: f
         _, _, _, margin = region.check(vn, ve, vd, q[:, 0], q[:, 1], q[:, 2], q[:, 3])
         margin = np.asarray(margin, float)
     else:  # attitude from the commanded acceleration (thrust along −z_body), as the guard predicts
-        wu = [predicted_blade_velocity_mps(a, b, c, 0, 0, 0, x, y, z, 0.0)
+        wu = [predicted_blade_velocity_mps(a, b, c, x, y, z, horizon_s=0.0)
               for a, b, c, x, y, z in zip(vn, ve, vd, an, ae, ad)]  # fmt: skip
         w, u = np.array(wu).T
         margin = np.asarray(region.margin(w, u), float)

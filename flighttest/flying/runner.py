@@ -2,9 +2,15 @@
 stream the trajectory → settle → land (or hold with ``--no-land``).
 
 Ctrl-C, SIGTERM, an exception, a guard abort, stale telemetry, link loss or leaving offboard at any
-point cancel the nominal flow and run the abort ladder (``flighttest.flying.guard.AbortLadder``) until the
+point cancel the nominal flow and run the abort ladder (``flighttest.flying.ladder_executor``) until the
 vehicle is held or on the ground; a second Ctrl-C skips to the next rung. The outcome, its reason
 and the log folder come back as a ``FlightOutcome``; ``summary.json`` is written last.
+
+The runner owns the flow and its lifecycle; its collaborators each own one job: ``FlightWatch``
+(``flighttest.flying.watch``) turns telemetry into guard decisions, descent timing and takeover
+detection, ``LadderExecutor`` carries the abort ladder out, ``FlightPauses`` keeps the garbage
+collector out of the flight. It flies through any ``Link`` (``open_link``) on its event loop's clock:
+MAVSDK in flight, a scripted autopilot in virtual time in ``tests/test_runner_virtual.py``.
 """
 
 from __future__ import annotations
@@ -17,7 +23,6 @@ import sys
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +30,13 @@ from flighttest.analysis import descent_time as dtime
 from flighttest.errors import FlighttestError
 from flighttest.flying import guard as gd
 from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopilot, z_position_gain_per_s
-from flighttest.flying.link import VehicleLink
+from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, LadderExecutor
+from flighttest.flying.link import Link, VehicleLink
 from flighttest.flying.log_writer import FlightLogWriter
-from flighttest.flying.missions_config import MissionConfig
-from flighttest.flying.pauses import FlightCollector
+from flighttest.flying.outcome import FlightOutcome, FlyRequest, Outcome, Phase, final_mode
+from flighttest.flying.pauses import FlightPauses
 from flighttest.flying.preflight import (
+    ABORT_PARAMS,
     PreflightResult,
     param_checks,
     trajectory_checks,
@@ -38,11 +45,12 @@ from flighttest.flying.preflight import (
 )
 from flighttest.flying.settling import SettleCheck
 from flighttest.flying.streamer import Setpoint, SetpointStreamer
+from flighttest.flying.watch import FlightWatch
 from flighttest.inputs import MAX_DURATION_S
-from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import Trajectory
 
-PILOT_MODES = gd.PILOT_MODES
+# re-exported: what callers of the runner have always imported from here
+__all__ = ["LADDER_TIMEOUT_S", "LINK_GIVE_UP_S", "FlightOutcome", "FlyRequest", "MissionRunner", "final_mode", "fly"]
 CLIMB_RATE_MPS = 1.0
 HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag before it judges them
 # settled: within this of the hover point, this slow (PX4's estimate wanders 0.3-0.8 m and its velocity
@@ -50,57 +58,20 @@ HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag befor
 SETTLE_TOL_M = 0.6
 SETTLE_SPEED_MPS = 0.25
 SETTLE_WINDOW_S = 1.0  # … or its position moved that slowly over this window (flighttest.flying.settling)
-LINK_GIVE_UP_S = 5.0  # no telemetry this long during the ladder: the vehicle's failsafe is in charge
 # a trajectory longer than this outlasts the battery (flighttest.inputs): a damaged file, not a flight,
 # and resampling it at the setpoint rate could need more memory than there is
 MAX_TRAJECTORY_S = MAX_DURATION_S
-LADDER_TIMEOUT_S = 120.0
 # while PX4 flies itself (its takeoff, its Land) telemetry missing longer than this starts the ladder
 LAND_STALE_S = gd.AUTOPILOT_STALE_S
 PARAMS_TIMEOUT_S = 3.0  # the preflight parameter snapshot may delay a flight by at most this
-# a mode counts as reported while armed once the vehicle stayed armed this long after it arrived: PX4
-# changes the mode it reports in the same heartbeat that says it disarmed (LAND → OFFBOARD or HOLD, the
-# mode before), and MAVSDK hands the two over separately
-MODE_SETTLE_S = 0.1
-
-
-@dataclass
-class FlyRequest:
-    connect: str
-    profile: VehicleProfile
-    config: MissionConfig
-    trajectory: Trajectory  # relative to its start point, as planned
-    mission_name: str
-    trajectory_path: str = ""
-    sysid: int | None = None
-    yes: bool = False
-    dry_run: bool = False
-    wind_ned_mps: tuple[float, float, float] | None = None
-    log_root: Path = Path("logs")
-    show_panel: bool = False
-    confirm: Callable[[PreflightResult], bool] | None = None  # go/no-go prompt
-    print_fn: Callable[[Any], None] = print
-
-
-@dataclass
-class FlightOutcome:
-    outcome: str  # completed | aborted | probe_stopped | refused | dry_run
-    abort_reason: str | None
-    descent_time_s: float | None
-    log_dir: str | None  # None: refused before anything answered, no folder was left
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def exit_code(self) -> int:
-        return {"completed": 0, "dry_run": 0, "probe_stopped": 0, "refused": 2}.get(self.outcome, 1)
-
-    def summary(self) -> dict[str, Any]:
-        return {"outcome": self.outcome, "abort_reason": self.abort_reason,
-                "descent_time_s": self.descent_time_s, "log_dir": self.log_dir, **self.extra}  # fmt: skip
 
 
 class _Refused(Exception):
     pass
+
+
+# builds the (unopened) link a flight flies through, from its .tlog path and the runner's event sink
+LinkFactory = Callable[[Path, Callable[[str, dict[str, Any]], None]], Link]
 
 
 def _healthy(st) -> bool:
@@ -108,18 +79,16 @@ def _healthy(st) -> bool:
 
 
 class MissionRunner:
-    _collector: FlightCollector | None = None  # the garbage collector held off while flying (flighttest.flying.pauses)
-
-    def __init__(self, req: FlyRequest) -> None:
+    def __init__(self, req: FlyRequest, open_link: LinkFactory | None = None) -> None:
         self.req = req
+        self.open_link = open_link or self._vehicle_link
         self.cfg = req.config
         self.fl = req.config.flight
         self.mission_name = req.mission_name
-        self.phase = "init"
-        self.link: VehicleLink | None = None
+        self.phase: str = Phase.INIT
+        self.link: Link | None = None
         self.streamer: SetpointStreamer | None = None
         self.log: FlightLogWriter | None = None
-        self.last_decision: gd.Decision | None = None
         self.ladder = gd.AbortLadder(gd.LadderTiming(
             recover_max_s=self.cfg.abort.recover_max_s, arrested_vd_mps=self.cfg.abort.arrested_vd_mps,
             hold_confirm_s=self.cfg.abort.hold_confirm_s, hold_dwell_s=self.cfg.abort.hold_dwell_s,
@@ -139,6 +108,11 @@ class MissionRunner:
         self.guard = gd.Guard(self.limits)
         self.guard.armed = False
         self.guard.fluct_active = False  # judged only while streaming, against this flight's hover
+        self.watch = FlightWatch(self.guard, self)
+        self.watch.wind_default_ned_mps = req.wind_ned_mps or (0.0, 0.0, 0.0)
+        self.ladder_run = LadderExecutor(self.ladder, self.cfg.abort, self.fl.rate_hz, self.limits.stale_after_s,
+                                         self, lambda: self.log.t0_mono)  # fmt: skip
+        self.pauses = FlightPauses(self.event)
         self.floor_active = False
         check_duration(req.trajectory)
         self.traj = req.trajectory.resample(self.fl.rate_hz)
@@ -146,28 +120,27 @@ class MissionRunner:
         self.origin: tuple[float, float, float] | None = None
         self.end_point: tuple[float, float, float] | None = None
         self.t_stream_start: float | None = None
-        self.descent_time_s: float | None = None
-        self.horizontal_error_m: float | None = None  # off the end point sideways when the descent was reached
-        self.descent_timer: dtime.DescentTimer | None = None  # the vertical-axis rule (analysis.descent_time)
-        self.ladder_phase: str | None = None  # the abort ladder's last phase event (abort_recover|hold|land)
-        self.mode_while_armed: str | None = None  # the flight mode last reported while armed
-        self._t_mode_change = -math.inf
         self.expect_offboard = False
         self.abort_event = asyncio.Event()
         self.abort_verdict = ""
-        self._ladder_cmds: asyncio.Queue[str] = asyncio.Queue()
-        self._recovery_task: asyncio.Task | None = None
-        self._land_task: asyncio.Task | None = None  # the ladder's Land command, sent in the background
         self._bg: list[asyncio.Task] = []
         self._signals = 0
-        self.first_inside_region_t: float | None = None
         self.connected = False  # an autopilot answered: from then on the log folder is kept
         self.panel = None  # the live panel while flying from a terminal
 
     # -- helpers -------------------------------------------------------------------------------------
+    @staticmethod
+    def now() -> float:
+        """The runner's clock: its event loop's (``time.monotonic`` in flight, virtual in the runner's
+        tests, ``sitl_fakes.virtual_time``); every time the runner keeps or compares is on it."""
+        try:
+            return asyncio.get_running_loop().time()
+        except RuntimeError:  # a decision judged outside a loop (tests of one listener)
+            return time.monotonic()
+
     def event(self, name: str, **fields: Any) -> None:
         if self.log is not None:
-            self.log.event(time.monotonic(), name, **fields)
+            self.log.event(self.now(), name, **fields)
 
     def set_phase(self, phase: str) -> None:
         self.phase = phase
@@ -178,14 +151,35 @@ class MissionRunner:
         if self.ladder.done:
             return
         first_time = not self.ladder.active
-        cmd = self.ladder.trigger(time.monotonic(), reason, first)
+        cmd = self.ladder.trigger(self.now(), reason, first)
         if first_time:
             self.abort_verdict = verdict
             self.guard.armed = False  # decisions keep being logged; the ladder is in charge now
             self.event("abort", reason=reason, rung=self.ladder.rung.name, phase=self.phase)
         if cmd:
-            self._ladder_cmds.put_nowait(cmd)
+            self.ladder_run.queue(cmd)
         self.abort_event.set()
+
+    @property
+    def last_decision(self) -> gd.Decision | None:
+        """The guard's latest decision (the live panel, the ladder's "region ok")."""
+        return self.watch.last_decision
+
+    @property
+    def descent_time_s(self) -> float | None:
+        return self.watch.descent_time_s
+
+    def _every_tick(self) -> None:
+        """Housekeeping at every stale-ticker period: a young collection if due, the log flushed if due."""
+        self.pauses.tick()
+        if self.log is not None:
+            self.log.flush_if_due()
+
+    def _vehicle_link(self, tlog_path: Path, on_event: Callable[[str, dict[str, Any]], None]) -> Link:
+        """The real link: MAVSDK to ``--connect``, with its .tlog recorder."""
+        req = self.req
+        return VehicleLink(req.connect, sysid=req.sysid, tlog_path=tlog_path, telemetry_hz=self.fl.telemetry_hz,
+                           connect_timeout_s=self.fl.connect_timeout_s, on_event=on_event)  # fmt: skip
 
     # -- telemetry listeners -------------------------------------------------------------------------
     def _feedforward(self, params: dict[str, Any] | None, autopilot: str | None) -> Feedforward:
@@ -205,158 +199,10 @@ class MissionRunner:
         self.event("feedforward", **ff.describe(), **catch_up.describe())
         return ff
 
-    def _wind(self) -> tuple[float, float, float]:
-        st = self.link.state
-        if st.wind_ned_mps is not None:
-            return st.wind_ned_mps
-        return self.req.wind_ned_mps or (0.0, 0.0, 0.0)
-
-    def _on_posvel(self, t: float) -> None:
-        st = self.link.state
-        acc = self.streamer.planned_accel_mps2(self.limits.horizon_s) if self.streamer is not None else (0, 0, 0)
-        s = gd.GuardSample(t, st.vn_mps, st.ve_mps, st.vd_mps, *st.q, st.alt_m, *self._wind(), *acc)
-        # below the floor is normal on the ground and in takeoff/landing: there the guard judges the rest
-        self.guard.floor_active = self.floor_active
-        d = self.guard.on_sample(s)
-        self.last_decision = d
-        if self.log is not None:
-            self.log.guard(d)
-        if d.margin_mps < 0 and self.first_inside_region_t is None and self.phase == "stream":
-            self.first_inside_region_t = t
-        if d.aborts:
-            self.abort(d.reason, verdict=d.verdict)
-        if st.armed and t - self._t_mode_change >= MODE_SETTLE_S:
-            self.mode_while_armed = st.flight_mode
-        timer = self.descent_timer
-        if timer is not None and timer.result is None and self.phase in dtime.DESCENT_PHASES and not self.ladder.active:
-            r = timer.update(t, st.n_m, st.e_m, st.d_m, st.vd_mps)
-            if r is not None:
-                self.descent_time_s, self.horizontal_error_m = r.descent_time_s, r.horizontal_error_m
-                self.event("descent_reached", **r.fields(), reached_t_s=round(r.t_s - self.log.t0_mono, 3),
-                           rule=timer.rule.describe())  # fmt: skip
-
-    def _on_imu(self, t: float) -> None:
-        st = self.link.state
-        for d in (self.guard.on_rates(t, *st.rates_rps), self.guard.on_vertical_accel(t, st.accel_frd_mps2[2])):
-            if d is not None:
-                if self.log is not None:
-                    self.log.guard(d)
-                if d.aborts:
-                    self.abort(d.reason, verdict=d.verdict)
-
-    def _on_mode(self, old: str, new: str) -> None:
-        self._t_mode_change = time.monotonic()
-        self.event("mode", old=old, new=new)
-        if self.phase == "land" and new in PILOT_MODES and not self.ladder.active:
-            # the pilot takes the landing over: send nothing more (the ladder, once started, sees it itself)
-            self.abort(f"pilot took over ({new}) while landing", gd.Rung.LAND)
-            self.ladder.finish(time.monotonic(), f"pilot in control ({new})")
-            return
-        if not self.expect_offboard or new == "OFFBOARD" or self.ladder.active:
-            return
-        if new in PILOT_MODES:
-            self.abort(f"pilot took over ({new})", gd.Rung.HOLD)
-            self.ladder.finish(time.monotonic(), f"pilot in control ({new})")
-        elif new == "LAND":
-            self.abort(f"left offboard unexpectedly ({old} → {new})", gd.Rung.HOLD)
-        else:
-            self.abort(f"left offboard unexpectedly ({old} → {new})", gd.Rung.HOLD)
-
-    def _on_connection(self, connected: bool) -> None:
-        self.event("link", connected=connected)
-        if not connected and self.guard.armed:
-            self.abort("link lost", gd.Rung.HOLD)
-        elif not connected and self.phase == "land" and not self.ladder.active:
-            # PX4 is landing (the guard is off for that): keep asking it to, and watch, in the ladder's Land
-            self.abort("link lost while landing", gd.Rung.LAND)
-
-    async def _stale_ticker(self) -> None:
-        """Stale telemetry between samples, every telemetry period, by phase (``flighttest.flying.guard``,
-        "Stale telemetry"): while flighttest flies offboard, no state sample for ``stale_after_s`` aborts
-        (the ladder starts at Recover). Where PX4 flies itself (arming, its takeoff, its Land, the Hold
-        of --no-land) a gap is logged once per gap (``stale_while_landing`` / ``stale_while_<phase>``) and
-        only one longer than ``autopilot_stale_s`` starts the ladder: at Hold, or at Land while landing,
-        where the ladder's Land keeps re-sending Land and gives up after LINK_GIVE_UP_S. Once the ladder
-        runs it watches the telemetry itself. Each phase's longest gap goes to the log (``telemetry_gaps``)."""
-        lim = self.limits
-        period = lim.telemetry_period_s
-        self.event("stale_rule", offboard_s=lim.stale_after_s, autopilot_s=lim.autopilot_stale_s,
-                   velocity_factor=gd.VELOCITY_STALE_FACTOR, tick_s=period)  # fmt: skip
-        gap_noted = False
-        gaps_phase = self.phase
-        try:
-            while True:
-                await asyncio.sleep(period)
-                if self.phase != gaps_phase:
-                    self._log_gaps(gaps_phase)
-                    gaps_phase = self.phase
-                d = self.guard.on_tick(time.monotonic(), self.phase)
-                if d is not None:
-                    # samples MAVSDK already handed over wait in the subscription queues until their
-                    # tasks run: let them run (a busy loop wakes this timer first), then judge again
-                    for _ in range(3):
-                        await asyncio.sleep(0)
-                    d = self.guard.on_tick(time.monotonic(), self.phase)
-                if d is None:
-                    gap_noted = False
-                elif self.ladder.active:
-                    pass  # the ladder judges freshness itself (telemetry_fresh), and Land watches it
-                elif d.aborts:
-                    self.last_decision = d
-                    if self.log is not None:
-                        self.log.guard(d)
-                    self.abort(d.reason, gd.stale_rung(self.phase), verdict=d.verdict)
-                elif d.action == gd.OBSERVE and not gap_noted:
-                    gap_noted = True
-                    if self.log is not None:
-                        self.log.guard(d)
-                    self.event("stale_while_landing" if self.phase == "land" else f"stale_while_{self.phase}",
-                               reason=d.reason)  # fmt: skip
-                if self._collector is not None:
-                    self._collector.maybe_collect()
-                if self.log is not None:
-                    self.log.flush_if_due()
-        finally:
-            self._log_gaps(gaps_phase)
-
-    def _log_gaps(self, phase: str) -> None:
-        """The longest gap between state samples (any stream, as the loop handled them) in ``phase``."""
-        if self.guard.max_gap_s > 0:
-            self.event("telemetry_gaps", phase=phase, max_gap_ms=round(self.guard.max_gap_s * 1000.0, 1))
-        self.guard.max_gap_s = 0.0
-
-    # -- loop pauses: the garbage collector (flighttest.flying.pauses) --------------------------------------
-    def _freeze_heap(self) -> None:
-        """Connected, before the preflight: one full collection (a full one of this heap pauses the process
-        for up to a few hundred ms) and everything alive frozen, out of every later collection."""
-        if self._collector is None:
-            self._collector = FlightCollector().__enter__()
-            st = self._collector.stats
-            self.event("gc", what="heap frozen", ms=round(st.entry_ms, 1), frozen=st.frozen)
-
-    def _hold_off_collector(self) -> None:
-        """Preflight done, arming next: what it made frozen too, and no automatic collections until the
-        flight is over (only at the safe points)."""
-        if self._collector is not None:
-            ms = self._collector.hold_off()
-            self.event("gc", what="held off", ms=round(ms, 1), frozen=self._collector.stats.frozen)
-
-    def _collect_now(self) -> None:
-        """A safe point: collect what the flight made so far (the rest is frozen: a few ms)."""
-        if self._collector is not None:
-            self.event("gc", what="safe point", ms=round(self._collector.safe_point(), 2))
-
-    def _restore_collector(self) -> None:
-        """Every exit of a flight: the collector as it was before, and what it did meanwhile."""
-        if self._collector is not None:
-            gcx, self._collector = self._collector, None
-            gcx.__exit__(None, None, None)
-            self.event("gc", what="restored", **gcx.stats.to_dict())
-
     # -- the run -------------------------------------------------------------------------------------
     async def run(self) -> FlightOutcome:
         req = self.req
-        self.log = FlightLogWriter(req.log_root, self.mission_name)
+        self.log = FlightLogWriter(req.log_root, self.mission_name, clock=self.now)
         try:
             self.log.write_meta({
                 "mission": self.mission_name, "config": self.cfg.to_dict(), "vehicle": req.profile.summary(),
@@ -371,23 +217,23 @@ class MissionRunner:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
-                loop.add_signal_handler(sig, self._on_signal, sig.name)
+                loop.add_signal_handler(sig, self.interrupt, sig.name)
         outcome: FlightOutcome | None = None
         try:
             outcome = await self._run_linked()
         except _Refused as exc:
-            outcome = self._outcome("refused", str(exc))
+            outcome = self._outcome(Outcome.REFUSED, str(exc))
         except FlighttestError as exc:
-            outcome = self._outcome("refused", str(exc))
+            outcome = self._outcome(Outcome.REFUSED, str(exc))
         except Exception as exc:  # a bug or a library's surprise: logged in full, one line for the user
             self.event("exception", error=repr(exc), traceback=traceback.format_exc())
-            outcome = self._outcome("aborted", self.ladder.reason or f"internal error: {exc!r}")
+            outcome = self._outcome(Outcome.ABORTED, self.ladder.reason or f"internal error: {exc!r}")
         finally:
             for sig in (signal.SIGINT, signal.SIGTERM):
                 with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
                     loop.remove_signal_handler(sig)
             if outcome is None:  # cancelled: still leave a summary
-                outcome = self._outcome("aborted", self.ladder.reason or "internal error")
+                outcome = self._outcome(Outcome.ABORTED, self.ladder.reason or "internal error")
             self.event("end", outcome=outcome.outcome, reason=outcome.abort_reason)
             if not self.connected:
                 # nothing answered, nothing flew: no folder (an empty .tlog would only break `analyse logs/`)
@@ -398,17 +244,17 @@ class MissionRunner:
                 self.log.close()
         return outcome
 
-    def _on_signal(self, name: str) -> None:
+    def interrupt(self, name: str = "SIGINT") -> None:
+        """What the operator's Ctrl-C (or SIGTERM) does: the first aborts (the ladder from Recover), each
+        further one skips to the next rung."""
         self._signals += 1
         self.event("signal", signal=name, count=self._signals)
         if self.ladder.active:
-            cmd = self.ladder.escalate(time.monotonic(), f"{name} again")
-            if cmd:
-                self._ladder_cmds.put_nowait(cmd)
+            self.ladder_run.queue(self.ladder.escalate(self.now(), f"{name} again"))
         else:
             self.abort(f"{name} from the operator", verdict="signal")
 
-    def _outcome(self, outcome: str, reason: str | None) -> FlightOutcome:
+    def _outcome(self, outcome: Outcome, reason: str | None) -> FlightOutcome:
         extra: dict[str, Any] = {"mission": self.mission_name, "phase_at_end": self.phase}
         if self.streamer is not None:
             j = self.streamer.jitter()
@@ -417,22 +263,20 @@ class MissionRunner:
         if self.link is not None:
             st = self.link.state
             extra.update(final_armed=st.armed, final_landed_state=st.landed_state, final_alt_m=st.alt_m,
-                         **final_mode(st.flight_mode, st.armed, self.mode_while_armed))  # fmt: skip
-        extra["horizontal_error_m"] = self.horizontal_error_m
+                         **final_mode(st.flight_mode, st.armed, self.watch.mode_while_armed))  # fmt: skip
+        extra["horizontal_error_m"] = self.watch.horizontal_error_m
         if self.ladder.history:
             extra["ladder"] = [{"t_s": round(t - self.log.t0_mono, 3), "rung": r, "why": w}
                                for t, r, w in self.ladder.history]  # fmt: skip
         if self.abort_verdict:
             extra["abort_verdict"] = self.abort_verdict
-        return FlightOutcome(outcome, reason, self.descent_time_s, str(self.log.dir), extra)
+        return FlightOutcome(outcome, reason, self.watch.descent_time_s, str(self.log.dir), extra)
 
     async def _run_linked(self) -> FlightOutcome:
         req = self.req
-        link = VehicleLink(req.connect, sysid=req.sysid, tlog_path=self.log.tlog_path,
-                           telemetry_hz=self.fl.telemetry_hz, connect_timeout_s=self.fl.connect_timeout_s,
-                           on_event=lambda n, f: self.event(n, **f))  # fmt: skip
+        link = self.open_link(self.log.tlog_path, lambda n, f: self.event(n, **f))
         self.link = link
-        self.set_phase("connect")
+        self.set_phase(Phase.CONNECT)
         connect_task = asyncio.create_task(link.open())
         try:
             await self._race(connect_task)
@@ -442,17 +286,15 @@ class MissionRunner:
         self.connected = connect_task.done() and not connect_task.cancelled()
         if self.ladder.active:  # Ctrl-C while connecting
             await link.close()
-            return self._outcome("aborted", self.ladder.reason)
+            return self._outcome(Outcome.ABORTED, self.ladder.reason)
         try:
-            self._freeze_heap()  # connected, nothing flying yet: the one long collection goes here
+            self.pauses.freeze()  # connected, nothing flying yet: the one long collection goes here
             self.streamer = SetpointStreamer(link.offboard_setters(), self.log, self.fl.rate_hz,
-                                             here=lambda: (link.state.n_m, link.state.e_m, link.state.d_m))  # fmt: skip
-            link.on_posvel.append(self._on_posvel)
-            link.on_attitude.append(self.guard.note_state_sample)
-            link.on_imu.append(self._on_imu)
-            link.on_mode.append(self._on_mode)
-            link.on_connection.append(self._on_connection)
-            self._bg.append(asyncio.create_task(self._stale_ticker()))
+                                             here=lambda: (link.state.n_m, link.state.e_m, link.state.d_m),
+                                             clock=self.now)  # fmt: skip
+            self.ladder_run.bind(link, self.streamer)
+            self.watch.attach(link)
+            self._bg.append(asyncio.create_task(self.watch.stale_ticker(self._every_tick)))
             panel = None
             if req.show_panel:
                 from flighttest.console import console
@@ -463,14 +305,11 @@ class MissionRunner:
             with panel if panel is not None else contextlib.nullcontext():
                 return await self._fly()
         finally:
-            self._restore_collector()
+            self.pauses.restore()
             for t in self._bg:
                 t.cancel()
             await asyncio.gather(*self._bg, return_exceptions=True)
-            for task in (self._recovery_task, self._land_task):
-                if task is not None:
-                    task.cancel()
-                    await asyncio.gather(task, return_exceptions=True)
+            await self.ladder_run.close()
             if self.streamer is not None:
                 self.streamer.stop_watchdog()
             await link.close()
@@ -495,10 +334,10 @@ class MissionRunner:
         if not pre.ok:
             raise _Refused(f"preflight failed: {pre.first_failure()}")
         if self.ladder.active:
-            return self._outcome("aborted", self.ladder.reason)
+            return self._outcome(Outcome.ABORTED, self.ladder.reason)
         if req.dry_run:
-            self.set_phase("dry_run")
-            return self._outcome("dry_run", None)
+            self.set_phase(Phase.DRY_RUN)
+            return self._outcome(Outcome.DRY_RUN, None)
         if not req.yes:
             if not sys.stdin.isatty():
                 raise _Refused("no terminal to confirm arming: pass --yes to fly without the go/no-go prompt")
@@ -513,18 +352,19 @@ class MissionRunner:
         except Exception as exc:  # the flow failed: treat like any other abort
             self.event("exception", error=repr(exc), traceback=traceback.format_exc())
             # a landing that went wrong goes on landing: Recover and Hold would stop it mid-air
-            self.abort(f"error: {exc}", gd.Rung.LAND if self.phase == "land" else gd.Rung.RECOVER, verdict="exception")
+            first = gd.Rung.LAND if self.phase == Phase.LAND else gd.Rung.RECOVER
+            self.abort(f"error: {exc}", first, verdict="exception")
             result = None
         if not self.ladder.active and result is not None:
             return result
-        await self._run_ladder()
-        outcome = "aborted"
+        await self.ladder_run.run()
+        outcome = Outcome.ABORTED
         if self.cfg.mission == "probe" and self.abort_verdict in (gd.FLUCTUATION, gd.SPEED_CAP, gd.FLOOR):
-            outcome = "probe_stopped"
+            outcome = Outcome.PROBE_STOPPED
         return self._outcome(outcome, self.ladder.reason)
 
     async def _preflight(self) -> PreflightResult:
-        self.set_phase("preflight")
+        self.set_phase(Phase.PREFLIGHT)
         link, req = self.link, self.req
         await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
         if not link.state.armed and link.state.flight_mode == "OFFBOARD":
@@ -532,7 +372,7 @@ class MissionRunner:
             # stream is not armable (the campaign's next flight on the same vehicle): Hold is armable
             self.event("mode_reset", old="OFFBOARD", new="HOLD", why="disarmed in Offboard is not armable")
             with contextlib.suppress(Exception):
-                await link.call(link.action.hold(), "hold", 5.0)
+                await link.hold(5.0)
         if not _healthy(link.state):
             # a vehicle that has just landed (the campaign's next flight) or booted is not armable
             # for some seconds (PX4 SITL: more than 10 s after a landing); wait before judging it
@@ -542,8 +382,6 @@ class MissionRunner:
                 self.event("healthy")
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
         params = {}
-        from flighttest.flying.preflight import ABORT_PARAMS
-
         for name, kind in ABORT_PARAMS.items():
             params[name] = await link.get_param(name, kind)
         # the parameter snapshot of this flight (params.json): everything relevant, read once and
@@ -563,11 +401,11 @@ class MissionRunner:
         except OSError as exc:
             self.event("warning", what=f"params.json not written ({exc})")
         self.stream_traj = for_autopilot(self.traj, self._feedforward(all_params, await link.autopilot_name()),
-                                         self._wind())  # fmt: skip
+                                         self.watch.wind_ned_mps())  # fmt: skip
         accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
         stats = trajectory_stats(self.traj, self.limits.region, accel)
         ab = self.cfg.abort
-        checks = vehicle_checks(link.state, time.monotonic(), self.fl.telemetry_hz, self.fl.min_battery_percent)
+        checks = vehicle_checks(link.state, self.now(), self.fl.telemetry_hz, self.fl.min_battery_percent)
         checks += param_checks(params, stats.descent_max_mps, req.profile.w_allow_mps)
         checks += trajectory_checks(stats, req.profile, self.fl.start_height_m, self.fl.min_alt_m,
                                     self.fl.geofence_radius_m, ab.recovery_lateral_mps * ab.recovery_s,
@@ -583,27 +421,28 @@ class MissionRunner:
         link, fl = self.link, self.fl
         st = link.state
         H = fl.start_height_m
-        self._hold_off_collector()
-        self.set_phase("arm")
+        self.pauses.hold_off()
+        self.set_phase(Phase.ARM)
         self.guard.armed = True
-        await link.call(link.action.arm(), "arm", 10.0)
+        await link.arm(10.0)
         self.event("armed")
-        self.set_phase("takeoff")
+        self.set_phase(Phase.TAKEOFF)
         with contextlib.suppress(Exception):
-            await link.call(link.action.set_takeoff_altitude(H), "set takeoff altitude", 5.0)
-        await link.call(link.action.takeoff(), "takeoff", 10.0)
+            await link.set_takeoff_altitude(H, 5.0)
+        await link.takeoff(10.0)
         ok = await link.wait_for(lambda s: s.alt_m >= min(H, 2.0) - 0.3 and s.in_air, fl.takeoff_timeout_s)
         if not ok:
             raise RuntimeError(f"takeoff did not reach {min(H, 2.0):.1f} m within {fl.takeoff_timeout_s:g} s")
         # offboard from here: climb to the exact start point, holding the trajectory's initial yaw
-        self.set_phase("climb")
+        self.set_phase(Phase.CLIMB)
         yaw0 = float(self.traj.df["yaw_deg"].iloc[0])
         here = Setpoint(st.n_m, st.e_m, st.d_m, yaw_deg=yaw0)
-        self.streamer.send(here, "climb")
+        self.streamer.send(here, Phase.CLIMB)
         loop = asyncio.get_running_loop()
-        self.streamer.start_watchdog(lambda: loop.call_soon_threadsafe(lambda: self.event("setpoint_watchdog")))
+        if link.realtime:  # a thread on the wall clock: it cannot judge a virtual stream
+            self.streamer.start_watchdog(lambda: loop.call_soon_threadsafe(lambda: self.event("setpoint_watchdog")))
         self.expect_offboard = True
-        await link.call(link.offboard.start(), "offboard start", 10.0)
+        await link.start_offboard(10.0)
         self.event("offboard", active=True)
         start = (st.n_m, st.e_m, -H)
         d0 = st.d_m
@@ -615,10 +454,10 @@ class MissionRunner:
             f = k / n_climb
             return Setpoint(start[0], start[1], d0 + f * (start[2] - d0), yaw_deg=yaw0)
 
-        await self.streamer.stream(climb_at, "climb", lambda: self.ladder.active)
+        await self.streamer.stream(climb_at, Phase.CLIMB, lambda: self.ladder.active)
         if self.ladder.active:  # the ladder owns the vehicle now: this flow must not send anything
             return None
-        self.set_phase("settle")
+        self.set_phase(Phase.SETTLE)
         hold = Setpoint(*start, yaw_deg=yaw0)
         await self._settle(hold, fl.settle_s, fl.settle_s * 3 + 10.0, baseline=True)
         if self.ladder.active:
@@ -628,11 +467,11 @@ class MissionRunner:
         if dtime.goes_somewhere((last["n_m"], last["e_m"], last["d_m"])):
             # a descent time only where the trajectory goes somewhere (the probe returns to its start)
             self.end_point = (start[0] + last["n_m"], start[1] + last["e_m"], start[2] + last["d_m"])
-        self.set_phase("stream")
+        self.set_phase(Phase.STREAM)
         self.floor_active = True
-        self.t_stream_start = time.monotonic()
+        self.t_stream_start = self.now()
         if self.end_point is not None:
-            self.descent_timer = dtime.DescentTimer(self.t_stream_start, self.end_point)
+            self.watch.descent_timer = dtime.DescentTimer(self.t_stream_start, self.end_point)
         self.event("stream_start", origin_ned=list(start), rows=len(self.traj.df),
                    end_ned=None if self.end_point is None else [float(x) for x in self.end_point])  # fmt: skip
         rate_base, accel_base = self.guard.freeze_baseline()
@@ -648,10 +487,10 @@ class MissionRunner:
         if self.ladder.active:
             return None
         end_sp = self.streamer.last_planned.hold() if self.streamer.last_planned else hold
-        self.set_phase("settle")
+        self.set_phase(Phase.SETTLE)
         # hover on until the descent counts as reached too (its rule is stricter than settling: an
         # overshoot of the end height settles before it is back within 0.2 m), or the settle times out
-        timer = self.descent_timer
+        timer = self.watch.descent_timer
         await self._settle(end_sp, fl.settle_s, fl.settle_s * 3 + 10.0, must_settle=False,
                            also=lambda: timer is None or timer.result is not None)  # fmt: skip
         if self.ladder.active:
@@ -659,28 +498,28 @@ class MissionRunner:
         self.floor_active = False
         self.expect_offboard = False
         if fl.land:
-            self.set_phase("land")
+            self.set_phase(Phase.LAND)
             self.guard.armed = False  # landing below the floor is the point; stale/link still end it
-            await link.call(link.action.land(), "land", 10.0)
+            await link.land(10.0)
             ok = await link.wait_for(lambda s: not s.armed, max(H, 1.0) / 0.5 + 30.0)
             if not ok:
                 raise RuntimeError("did not land and disarm in time")
-            self.set_phase("landed")
+            self.set_phase(Phase.LANDED)
         else:
-            self.set_phase("hold")
-            await link.call(link.offboard.stop(), "offboard stop", 10.0)
+            self.set_phase(Phase.HOLD)
+            await link.stop_offboard(10.0)
             if not await link.wait_for(lambda s: s.flight_mode == "HOLD", 5.0):
                 raise RuntimeError("Hold not confirmed after the flight (--no-land)")
-        return self._outcome("completed", None)
+        return self._outcome(Outcome.COMPLETED, None)
 
     async def _settle(self, sp: Setpoint, min_s: float, max_s: float, baseline: bool = False,
                       must_settle: bool = True, also: Callable[[], bool] | None = None) -> None:  # fmt: skip
         """Hover at ``sp`` until settled (and ``also()``); with ``baseline`` the guard's hover
         fluctuation baseline is the settled part of it (the climb's transient is not the hover). Not
         settling within ``max_s`` is an error only where it must (before the descent)."""
-        self._collect_now()  # PX4 holds the position: a pause of a few ms costs nothing here
+        self.pauses.safe_point()  # PX4 holds the position: a pause of a few ms costs nothing here
         st = self.link.state
-        t0 = time.monotonic()
+        t0 = self.now()
         settled_since = None
         check = SettleCheck((sp.n_m, sp.e_m, sp.d_m), SETTLE_TOL_M, SETTLE_SPEED_MPS, SETTLE_WINDOW_S)
 
@@ -688,7 +527,7 @@ class MissionRunner:
             nonlocal settled_since
             if self.ladder.active:
                 return True
-            now = time.monotonic()
+            now = self.now()
             if check.update(now, (st.n_m, st.e_m, st.d_m), (st.vn_mps, st.ve_mps, st.vd_mps)):
                 if settled_since is None and baseline:
                     self.guard.start_baseline()
@@ -704,149 +543,6 @@ class MissionRunner:
                     and (also is None or also()))
 
         await self.streamer.stream(lambda k: sp, self.phase, done)
-
-    # -- the abort ladder ----------------------------------------------------------------------------
-    async def _run_ladder(self) -> None:
-        link = self.link
-        st = link.state
-        self.event("ladder_start", reason=self.ladder.reason, rung=self.ladder.rung.name)
-        t_start = time.monotonic()
-        logged = 0  # from the trigger on (made in a listener, before this loop ran)
-
-        def log_decisions() -> None:  # every rung change and every decision within a rung, as it happens
-            nonlocal logged
-            for t, rung, why in self.ladder.history[logged:]:
-                self.event("ladder", rung=rung, why=why, decided_t_s=round(t - self.log.t0_mono, 3))
-            logged = len(self.ladder.history)
-
-        if not st.armed and not st.in_air:
-            self.ladder.finish(time.monotonic(), "vehicle on the ground")
-        while not self.ladder.done:
-            while not self._ladder_cmds.empty():
-                await self._execute(self._ladder_cmds.get_nowait())
-            log_decisions()
-            now = time.monotonic()
-            fresh = st.t_posvel is not None and now - st.t_posvel <= self.limits.stale_after_s
-            heard = max((t for t in (st.t_posvel, st.t_att, st.t_imu) if t is not None), default=t_start)
-            d = self.last_decision
-            ob = gd.LadderObservation(
-                t_s=now, vd_mps=st.vd_mps, region_ok=d is None or not (d.margin_mps < 0),
-                telemetry_fresh=fresh, mode=st.flight_mode,
-                landed=not st.armed, link_ok=st.connected,  # done when disarmed, not at touchdown
-                heard_age_s=now - max(heard, t_start),
-            )  # fmt: skip
-            cmd = self.ladder.step(ob)
-            log_decisions()
-            if cmd:
-                await self._execute(cmd)
-            if not self.ladder.done and now - t_start > LADDER_TIMEOUT_S:
-                self.ladder.finish(now, "ladder timed out")
-            log_decisions()
-            await asyncio.sleep(0.05)
-        log_decisions()
-        self.event("ladder_end", history=[(round(t - self.log.t0_mono, 3), r, w) for t, r, w in self.ladder.history],
-                   mode=st.flight_mode, armed=st.armed)  # fmt: skip
-
-    async def _execute(self, cmd: str) -> None:
-        link, st = self.link, self.link.state
-        self.event("ladder_command", command=cmd)
-        try:
-            if cmd == gd.CMD_RECOVER:
-                if st.flight_mode != "OFFBOARD" or self.phase not in ("climb", "settle", "stream"):
-                    nxt = self.ladder.escalate(time.monotonic(), f"not in offboard ({st.flight_mode})")
-                    if nxt:
-                        await self._execute(nxt)
-                    return
-                self._ladder_phase("abort_recover")
-                self._recovery_task = asyncio.create_task(self._recover())
-            elif cmd == gd.CMD_HOLD:
-                self._ladder_phase("abort_hold")
-                await self._stop_recovery()
-                if math.isfinite(st.n_m):
-                    yaw = self.streamer.last.yaw_deg if self.streamer.last else 0.0
-                    self.streamer.leave_hold(st.n_m, st.e_m, st.d_m, yaw, "abort_hold")
-                if st.flight_mode == "OFFBOARD":
-                    await link.call(link.offboard.stop(), "offboard stop (hold)", 5.0)
-                else:
-                    await link.call(link.action.hold(), "hold", 5.0)
-            elif cmd == gd.CMD_LAND:
-                self._ladder_phase("abort_land")
-                await self._stop_recovery()
-                # in the background: with the link gone the call takes its whole timeout, and the
-                # ladder must go on watching (and give up) meanwhile
-                if self._land_task is not None and not self._land_task.done():
-                    self.event("ladder_command_skipped", command=cmd, why="the last Land is still unanswered")
-                else:
-                    self._land_task = asyncio.create_task(self._send_land())
-        except Exception as exc:
-            self.event("ladder_command_failed", command=cmd, error=str(exc))
-            if cmd == gd.CMD_HOLD:
-                nxt = self.ladder.escalate(time.monotonic(), f"hold failed: {exc}")
-                if nxt:
-                    self._ladder_cmds.put_nowait(nxt)
-
-    def _ladder_phase(self, phase: str) -> None:
-        """A ``phase`` event for the rung the ladder now commands (once per rung), so whatever the vehicle
-        does from here (PX4's own Land after an abort included) is labelled an abort in the log and never
-        taken for the flight's descent. ``self.phase`` stays the nominal flow's: where the flight was
-        when it aborted (``phase_at_end``)."""
-        if phase != self.ladder_phase:
-            self.ladder_phase = phase
-            self.event("phase", phase=phase, nominal_phase=self.phase)
-
-    async def _send_land(self) -> None:
-        try:
-            await self.link.call(self.link.action.land(), "land", 5.0)
-        except Exception as exc:  # the ladder re-sends it; the log says why this one failed
-            self.event("ladder_command_failed", command=gd.CMD_LAND, error=str(exc))
-
-    async def _stop_recovery(self) -> None:
-        if self._recovery_task is not None:
-            self._recovery_task.cancel()
-            await asyncio.gather(self._recovery_task, return_exceptions=True)
-            self._recovery_task = None
-
-    def _recovery_direction(self) -> tuple[float, float]:
-        """Unit horizontal direction for the escape: keep moving the way we move (it adds u and the
-        plan cleared that path); when nearly still, back towards the start point (the plan's clear
-        area); else the nose direction."""
-        st = self.link.state
-        vh = math.hypot(st.vn_mps, st.ve_mps)
-        if vh > 0.3:
-            return st.vn_mps / vh, st.ve_mps / vh
-        if self.origin is not None:
-            dn, de = self.origin[0] - st.n_m, self.origin[1] - st.e_m
-            dist = math.hypot(dn, de)
-            if dist > 0.5:
-                return dn / dist, de / dist
-        yaw = math.radians(self.streamer.last.yaw_deg if self.streamer.last else 0.0)
-        return math.cos(yaw), math.sin(yaw)
-
-    async def _recover(self) -> None:
-        """Rung 1: level, arrest the sink (small climb), add lateral speed; then hold position."""
-        ab, st = self.cfg.abort, self.link.state
-        un, ue = self._recovery_direction()
-        yaw = self.streamer.last.yaw_deg if self.streamer.last else 0.0
-        lat = ab.recovery_lateral_mps
-
-        def rec_at(k: int) -> Setpoint:
-            return Setpoint(st.n_m, st.e_m, st.d_m, un * lat, ue * lat, -ab.recovery_climb_mps, yaw_deg=yaw,
-                            velocity_only=True)  # fmt: skip
-
-        ticks = max(int(ab.recovery_s * self.fl.rate_hz), 1)
-        await self.streamer.stream(rec_at, "recover", max_ticks=ticks)
-        hold = Setpoint(st.n_m, st.e_m, st.d_m, yaw_deg=yaw)
-        await self.streamer.stream(lambda k: hold, "recover_hold")
-
-
-def final_mode(reported: str, armed: bool, while_armed: str | None) -> dict[str, Any]:
-    """``final_mode`` of ``summary.json``: the mode the vehicle reports, or, once it has disarmed, the mode
-    it was in when it disarmed (PX4 reports the mode before the landing after disarming: OFFBOARD
-    or HOLD on the ground); ``final_mode_note`` says which, and what it reports now, when they differ."""
-    if armed or while_armed is None or while_armed == reported:
-        return {"final_mode": reported, "final_mode_note": None if armed or while_armed is None else "at disarm"}
-    return {"final_mode": while_armed, "final_mode_note": f"at disarm; {reported} reported after disarming"}
-
 
 def check_duration(traj: Trajectory, what: str = "trajectory") -> None:
     """A finite, bounded duration before anything resamples or streams the trajectory."""

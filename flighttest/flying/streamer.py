@@ -70,7 +70,8 @@ class SetpointStreamer:
     """Sends setpoints through MAVSDK's offboard plugin and logs each one with its send time."""
 
     def __init__(self, offboard_plugin, log=None, rate_hz: float = 50.0, stuck_after_s: float = 0.15,
-                 here: Callable[[], tuple[float, float, float]] | None = None) -> None:  # fmt: skip
+                 here: Callable[[], tuple[float, float, float]] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:  # fmt: skip
         from mavsdk.plugins.offboard import AccelerationNed, PositionNedYaw, VelocityNedYaw
 
         self._P, self._V, self._A = PositionNedYaw, VelocityNedYaw, AccelerationNed
@@ -80,6 +81,8 @@ class SetpointStreamer:
         self.rate_hz = rate_hz
         self.period_s = 1.0 / rate_hz
         self.stuck_after_s = stuck_after_s
+        # the loop's clock (the runner's): send times, their intervals and the watchdog's judgement
+        self.clock = clock
         self.last: Setpoint | None = None
         self.phase = ""
         self.intervals_s: list[float] = []
@@ -99,8 +102,7 @@ class SetpointStreamer:
 
     # -- one setpoint ------------------------------------------------------------------------------
     def send(self, sp: Setpoint, phase: str) -> bool:
-        now_pc = time.perf_counter()
-        t_mono = time.monotonic()
+        now_pc = t_mono = self.clock()
         planned, sp = sp, self._limited(sp)
         with self._lock:
             ok = self._send_raw(sp)
@@ -266,7 +268,7 @@ class SetpointStreamer:
                     last, last_t = self.last, self._last_send_pc
                     if last is None or last_t is None:
                         continue
-                    if time.perf_counter() - last_t > self.stuck_after_s and (last != last.hold()):
+                    if self.clock() - last_t > self.stuck_after_s and (last != last.hold()):
                         self._send_raw(last.hold())
                         self.last = last.hold()
                         self.watchdog_fired += 1

@@ -3,6 +3,14 @@
 Quaternions are ``(w, x, y, z)`` and rotate body → NED, as PX4 and MAVSDK report them. Functions
 take either scalars or numpy arrays (one element per state) and use plain arithmetic, so a single
 guard sample costs microseconds and a million states run vectorised through the *same* code.
+
+**One argument order** for every helper that rotates a vector, here and elsewhere (the guard's
+``predicted_blade_velocity_mps``, the fake's own ``sitl_fakes.physics.rotate_*`` and
+``sitl_fakes.disturbance.blade_velocity_mps``): the vector's three components first, then the
+quaternion's ``w, x, y, z``, then (where there is one) the wind's three components, defaulting to
+still air. A quaternion alone (``quat_to_rotmat``, ``quat_to_euler``, ``quat_multiply``) is one
+``(..., 4)`` array. Both sides of a swap are seven floats, so nothing but a test catches one:
+``tests/test_frames.py`` checks every helper's signature and a rotation with a known answer.
 """
 
 from __future__ import annotations
@@ -12,6 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from flighttest.model.aero import CONE_DEG, guard_margin_mps
+
+# a float for one state, an array (one element per state) for many: the same arithmetic serves both
+FloatOrArray = float | np.ndarray
 
 UNIT_QUAT_TOL = 1e-3
 # WGS-84 equatorial radius: local north/east metres from latitude/longitude (flat Earth over a flight)
@@ -76,7 +87,10 @@ def quat_multiply(a, b) -> np.ndarray:
     )
 
 
-def ned_to_body(vn, ve, vd, qw, qx, qy, qz):
+def ned_to_body(
+    vn: FloatOrArray, ve: FloatOrArray, vd: FloatOrArray,
+    qw: FloatOrArray, qx: FloatOrArray, qy: FloatOrArray, qz: FloatOrArray,
+) -> tuple[FloatOrArray, FloatOrArray, FloatOrArray]:  # fmt: skip
     """Rotate a NED vector into body FRD: ``v_b = R(q)ᵀ v_ned``. Returns (vx, vy, vz) body.
 
     Uses ``v' = v + 2 r × (r × v + s v)`` with the conjugate quaternion (s, r) = (w, −x, −y, −z),
@@ -94,12 +108,19 @@ def ned_to_body(vn, ve, vd, qw, qx, qy, qz):
     return bx, by, bz
 
 
-def body_to_ned(bx, by, bz, qw, qx, qy, qz):
+def body_to_ned(
+    bx: FloatOrArray, by: FloatOrArray, bz: FloatOrArray,
+    qw: FloatOrArray, qx: FloatOrArray, qy: FloatOrArray, qz: FloatOrArray,
+) -> tuple[FloatOrArray, FloatOrArray, FloatOrArray]:  # fmt: skip
     """Rotate a body FRD vector into NED: ``v_ned = R(q) v_b``."""
     return ned_to_body(bx, by, bz, qw, -qx, -qy, -qz)
 
 
-def blade_velocity_mps(vn, ve, vd, qw, qx, qy, qz, wn=0.0, we=0.0, wd=0.0):
+def blade_velocity_mps(
+    vn: FloatOrArray, ve: FloatOrArray, vd: FloatOrArray,
+    qw: FloatOrArray, qx: FloatOrArray, qy: FloatOrArray, qz: FloatOrArray,
+    wn: FloatOrArray = 0.0, we: FloatOrArray = 0.0, wd: FloatOrArray = 0.0,
+) -> tuple[FloatOrArray, FloatOrArray]:  # fmt: skip
     """Air-relative blade-frame velocity: ``w`` (m/s, > 0 = air flows up through the disk) and ``u``.
 
     ``v_air_ned = v_ned − wind_ned``; ``v_b = R(q)ᵀ v_air``; ``w = v_b,z``; ``u = hypot(v_b,x, v_b,y)``.
@@ -143,4 +164,3 @@ def validate_quaternion(qw, qx, qy, qz, tol: float = UNIT_QUAT_TOL) -> np.ndarra
     n2 = np.asarray(qw, float) ** 2 + np.asarray(qx, float) ** 2 + np.asarray(qy, float) ** 2
     n2 = n2 + np.asarray(qz, float) ** 2
     return np.isfinite(n2) & (np.abs(np.sqrt(np.where(np.isfinite(n2), n2, 0.0)) - 1.0) <= tol)
-

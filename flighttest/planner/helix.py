@@ -46,6 +46,7 @@ from flighttest.model.aero import G_MPS2
 from flighttest.model.frames import quat_from_euler, quat_multiply, quat_to_rotmat
 from flighttest.model.profiles import VehicleProfile
 from flighttest.planner.cone import VelocityConstraint
+from flighttest.planner.multistart import attempt_record, multistart_refined, refine
 from flighttest.planner.ocp import (
     DenseSolution,
     MinTimeOcp,
@@ -471,8 +472,8 @@ class HelixSolution(SolvedOcp):
 
 
 def _attempt(r: OcpResult) -> dict:
-    return {"guess": r.guess, "status": r.status, "t_f_s": r.t_f_s, "solve_s": r.solve_s, "iterations": r.iterations,
-            "n_intervals": len(r.t_s) - 1}  # fmt: skip
+    """The attempts row of a helix solve: the mesh size too (a long descent's grows with its length)."""
+    return {**attempt_record(r), "n_intervals": len(r.t_s) - 1}
 
 
 # What the 1 kHz dense re-simulation may exceed the limits by (between the mesh nodes).
@@ -567,20 +568,17 @@ def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
     if t_steady <= LONG_DESCENT_S:
         coarse = MinTimeOcp(_spec(p, p.n_coarse), verbose=verbose)
         t_guess = max(2.0, 2.5 * math.sqrt(p.height_m))
-        best: OcpResult | None = None
-        fallback: OcpResult | None = None
-        for turns in (1.0, 2.0):
+
+        def solve_start(turns: float) -> OcpResult:
             xg, ug = helix_guess(p, p.n_coarse, turns, t_guess * (0.8 + 0.2 * turns))
-            r = coarse.solve(t_guess, xg, ug, name=f"helix{turns:g}")
-            attempts.append(_attempt(r))
-            if r.success and (best is None or r.t_f_s < best.t_f_s):
-                best = r
-            elif fallback is None or r.max_defect < fallback.max_defect:
-                fallback = r
-        final = best if best is not None else fallback
-        if best is not None:
+            return coarse.solve(t_guess, xg, ug, name=f"helix{turns:g}")
+
+        def refinement_for(_turns: float) -> _Tightening:
             fine = coarse if p.n_intervals == p.n_coarse else MinTimeOcp(_spec(p, p.n_intervals), verbose=verbose)
-            final = _fine_and_tighten(p, fine, best, None, attempts)
+            return _Tightening(p, fine, None)
+
+        final = multistart_refined((1.0, 2.0), solve_start, refinement_for, TIGHTEN_ROUNDS, attempts,
+                                   record=_attempt)  # fmt: skip
     else:
         mesh = long_descent_mesh(p, t_steady)
         n = len(mesh)
@@ -591,7 +589,7 @@ def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
         start = OcpResult(status="warm start (not solved)", success=False, t_f_s=t_g, t_s=t_s,
                           x=_interp_rows(t_s, t_dense, x_dense), u=_interp_rows(t_s, t_dense, u_dense),
                           solve_s=0.0, iterations=0, max_defect=np.inf, mesh=mesh, guess="steady")  # fmt: skip
-        final = _fine_and_tighten(p, fine, start, mesh, attempts)
+        final = refine(start, _Tightening(p, fine, mesh), TIGHTEN_ROUNDS, attempts)
     sol = HelixSolution(problem=p, result=final, attempts=attempts, solve_s=0.0, check={})
     sol.check = resimulation_check(sol)
     sol.solve_s = time.perf_counter() - t0
@@ -649,36 +647,42 @@ class _Backoff:
                 "share": float(np.mean((self.tilt_rad > 0) | (self.radius_m > 0) | (self.cone_mps > 0)))}  # fmt: skip
 
 
-def _fine_and_tighten(p: HelixProblem, fine: MinTimeOcp, start: OcpResult, mesh: np.ndarray | None,
-                      attempts: list[dict]) -> OcpResult:  # fmt: skip
-    n = fine.spec.n_intervals
-    backoff = _Backoff(p, n)
-    current = start
-    for round_ in range(TIGHTEN_ROUNDS + 1):
-        xg = resample_guess(current.t_s, current.x, n, mesh)
-        ug = resample_guess(current.t_s, current.u, n, mesh)
-        label = f"{start.guess} fine" + (f" tighten{round_}" if round_ else "")
+class _Tightening:
+    """The helix's fine solve and its tightening rounds (a ``multistart.Refinement``): bounds tightened
+    where the dense re-simulation leaves them between nodes (``_Backoff``), on a fixed mesh."""
+
+    word = "tighten"
+
+    def __init__(self, p: HelixProblem, fine: MinTimeOcp, mesh: np.ndarray | None):
+        self.p = p
+        self.fine = fine
+        self.mesh = mesh
+        self.backoff = _Backoff(p, fine.spec.n_intervals)
+
+    def solve(self, current: OcpResult, label: str, round_: int) -> OcpResult:
+        n = self.fine.spec.n_intervals
+        xg = resample_guess(current.t_s, current.x, n, self.mesh)
+        ug = resample_guess(current.t_s, current.u, n, self.mesh)
         warm = current if round_ > 0 else None  # the same NLP's multipliers (used where IPOPT warm-starts)
-        r = fine.solve(current.t_f_s, xg, ug, name=label, path_lb=backoff.path_lb(), mesh=mesh, warm=warm)
-        attempts.append({**_attempt(r), "backoff": backoff.summary()})
-        if not r.success:
-            if not current.success:
-                current = r  # the start was only a guess: report this solve (its check says what it breaks)
-            break  # else keep the last solution that converged
-        current = r
-        over, per = _overshoots(p, current)
-        if all(v <= 0 for v in over.values()) or round_ == TIGHTEN_ROUNDS:
-            break
+        return self.fine.solve(current.t_f_s, xg, ug, name=label, path_lb=self.backoff.path_lb(), mesh=self.mesh,
+                               warm=warm)  # fmt: skip
+
+    def record(self, r: OcpResult) -> dict:
+        return {**_attempt(r), "backoff": self.backoff.summary()}
+
+    def again(self, r: OcpResult) -> bool:
+        over, per = _overshoots(self.p, r)
+        if all(v <= 0 for v in over.values()):
+            return False
         moved = False
         for key, over_key, tol, unit in (("cone_mps", "cone_mps", CONE_TOL_MPS, 1.0),
                                          ("radius_m", "radius_m", RADIUS_TOL_M, 1.0),
                                          ("tilt_rad", "tilt_deg", TILT_TOL_DEG, math.radians(1.0))):  # fmt: skip
             if over[over_key] > 0:
                 step = (TIGHTEN_GAIN * per[over_key] + tol) * unit
-                moved |= backoff.raise_where(key, per[over_key], step)
-        if not moved:
-            break  # every bound that still breaks is at its largest backoff: the check reports it
-    return current
+                moved |= self.backoff.raise_where(key, per[over_key], step)
+        # nothing moved: every bound that still breaks is at its largest backoff, the check reports it
+        return moved
 
 
 def _overshoots(p: HelixProblem, r: OcpResult):

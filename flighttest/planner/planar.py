@@ -13,7 +13,8 @@ Constraint: ``VelocityConstraint`` on the air-relative body-frame velocity (``co
 smooth, sound formulation of both ``|u|`` branches). Non-convexity is handled by solving from
 several kinematically consistent initial guesses (oblique either way, zig-zags with 1–3 reversals,
 flips forward/backward and there-and-back) on a coarse mesh, and refining the best on a finer mesh
-warm-started from it. The winner is re-simulated at 1 kHz with the interpolated controls to
+warm-started from it (the skeleton is ``multistart``'s; this module gives it the starts and the
+mesh refinement). The winner is re-simulated at 1 kHz with the interpolated controls to
 measure the true worst margin between the nodes.
 """
 
@@ -30,6 +31,7 @@ import numpy as np
 from flighttest.errors import FlighttestError
 from flighttest.model.aero import G_MPS2
 from flighttest.planner.cone import VelocityConstraint, planar_blade_velocity
+from flighttest.planner.multistart import attempt_record, families_agree, multistart_refined
 from flighttest.planner.ocp import (
     MinTimeOcp,
     OcpResult,
@@ -214,7 +216,11 @@ def _guess(p: PlanarProblem, n: int, t_f: float, y_of_tau, phi_of_tau=None, name
     return name, t_f, x, u
 
 
-def initial_guesses(p: PlanarProblem, n: int) -> list[tuple[str, float, np.ndarray, np.ndarray, float]]:
+# (name, T, X, U, final φ) of one start of the multi-start
+PlanarGuess = tuple[str, float, np.ndarray, np.ndarray, float]
+
+
+def initial_guesses(p: PlanarProblem, n: int) -> list[PlanarGuess]:
     """(name, T, X, U, final φ) for the multi-start search."""
     h = p.height_m
     # Oblique descent on the cone's edge needs about h/tan(20°) of sideways room.
@@ -304,6 +310,8 @@ _OCP_CACHE: dict[tuple, MinTimeOcp] = {}
 def clear_ocp_cache() -> None:
     """Forget the compiled planar NLPs (a benchmark that times compilation starts cold)."""
     _OCP_CACHE.clear()
+
+
 REFINE_TOL_MPS = 1e-3
 REFINE_ROUNDS = 3
 # The coarse multi-start stops once starts of two different guess families (oblique, zig-zag with
@@ -325,8 +333,49 @@ def _ocp(p: PlanarProblem, n: int, verbose: bool) -> MinTimeOcp:
     return ocp.with_bounds_of(spec)
 
 
-def _attempt(r: OcpResult) -> dict:
-    return {"guess": r.guess, "status": r.status, "t_f_s": r.t_f_s, "solve_s": r.solve_s, "iterations": r.iterations}
+def _final_bounds(ocp: MinTimeOcp, phi_f: float) -> tuple[np.ndarray, np.ndarray]:
+    """The NLP's final-state bounds with the final roll of the start's family (a flip ends at ±2π)."""
+    xf_lb = ocp.spec.xf_lb.copy()
+    xf_ub = ocp.spec.xf_ub.copy()
+    xf_lb[IPHI] = xf_ub[IPHI] = phi_f
+    return xf_lb, xf_ub
+
+
+def _family(guess: str) -> str:
+    """A guess's family: mirrored twins (``oblique+1``/``oblique-1``) are one (see ``AGREE_REL``)."""
+    return re.sub(r"[+-]\d*$", "", guess)
+
+
+class _MeshRefinement:
+    """The planar fine solve and its refinement rounds (a ``multistart.Refinement``): mesh nodes
+    move to where the 1 kHz re-simulation still finds the constraint broken between nodes."""
+
+    word = "refine"
+
+    def __init__(self, p: PlanarProblem, fine: MinTimeOcp, phi_f: float):
+        self.p = p
+        self.fine = fine
+        self.xf_lb, self.xf_ub = _final_bounds(fine, phi_f)
+        self.mesh: np.ndarray | None = None  # uniform until a round finds a violation
+        self.hot_s: list[float] = []  # every violation found so far: nodes stay crowded where they were
+
+    def solve(self, current: OcpResult, label: str, round_: int) -> OcpResult:
+        n = self.p.n_intervals
+        xg = resample_guess(current.t_s, current.x, n, self.mesh)
+        ug = resample_guess(current.t_s, current.u, n, self.mesh)
+        return self.fine.solve(current.t_f_s, xg, ug, name=label, xf_lb=self.xf_lb, xf_ub=self.xf_ub,
+                               mesh=self.mesh)  # fmt: skip
+
+    def record(self, r: OcpResult) -> dict:
+        return attempt_record(r)
+
+    def again(self, r: OcpResult) -> bool:
+        t_re, margin = _resim_margin(self.p, r)
+        if margin.min() >= -REFINE_TOL_MPS:
+            return False
+        self.hot_s.extend(violation_times(t_re, margin, REFINE_TOL_MPS))
+        self.mesh = refined_mesh(np.linspace(0.0, r.t_f_s, self.p.n_intervals + 1), np.array(self.hot_s))
+        return True
 
 
 def solve_planar(p: PlanarProblem, verbose: bool = False) -> PlanarSolution:
@@ -335,58 +384,19 @@ def solve_planar(p: PlanarProblem, verbose: bool = False) -> PlanarSolution:
     p.validate()
     t0 = time.perf_counter()
     coarse = _ocp(p, p.n_coarse, verbose)
+
+    def solve_start(guess: PlanarGuess) -> OcpResult:
+        name, t_g, xg, ug, phi_f = guess
+        xf_lb, xf_ub = _final_bounds(coarse, phi_f)
+        return coarse.solve(t_g, xg, ug, name=name, xf_lb=xf_lb, xf_ub=xf_ub)
+
+    def refinement_for(guess: PlanarGuess) -> _MeshRefinement:
+        return _MeshRefinement(p, _ocp(p, p.n_intervals, verbose), phi_f=guess[4])
+
     attempts: list[dict] = []
-    best: tuple[OcpResult, float] | None = None
-    fallback: OcpResult | None = None
-    agreeing: set[str] = set()  # guess families whose starts reached the best time so far
-    for name, t_g, xg, ug, phi_f in initial_guesses(p, p.n_coarse):
-        xf_lb = coarse.spec.xf_lb.copy()
-        xf_ub = coarse.spec.xf_ub.copy()
-        xf_lb[IPHI] = xf_ub[IPHI] = phi_f
-        r = coarse.solve(t_g, xg, ug, name=name, xf_lb=xf_lb, xf_ub=xf_ub)
-        attempts.append(_attempt(r))
-        if not r.success:
-            if fallback is None or r.max_defect < fallback.max_defect:
-                fallback = r
-            continue
-        family = re.sub(r"[+-]\d*$", "", name)  # mirrored twins share a family
-        same = best is not None and abs(r.t_f_s - best[0].t_f_s) <= AGREE_REL * best[0].t_f_s
-        if same:
-            agreeing.add(family)
-        elif best is None or r.t_f_s < best[0].t_f_s:
-            agreeing = {family}
-        if best is None or r.t_f_s < best[0].t_f_s:
-            best = (r, phi_f)
-        if len(agreeing) >= 2:
-            break  # two starts found the same best optimum: more starts rarely beat it (see AGREE_REL)
-    if best is None:
-        sol = PlanarSolution(problem=p, result=fallback, attempts=attempts, solve_s=0.0, check={})
-        sol.check = resimulation_check(sol)
-        sol.solve_s = time.perf_counter() - t0
-        return sol
-    res, phi_f = best
-    fine = _ocp(p, p.n_intervals, verbose)
-    xf_lb = fine.spec.xf_lb.copy()
-    xf_ub = fine.spec.xf_ub.copy()
-    xf_lb[IPHI] = xf_ub[IPHI] = phi_f
-    current = res
-    hot: list[float] = []
-    mesh = None
-    for round_ in range(REFINE_ROUNDS + 1):
-        xg = resample_guess(current.t_s, current.x, p.n_intervals, mesh)
-        ug = resample_guess(current.t_s, current.u, p.n_intervals, mesh)
-        label = f"{res.guess} fine" + (f" refine{round_}" if round_ else "")
-        r = fine.solve(current.t_f_s, xg, ug, name=label, xf_lb=xf_lb, xf_ub=xf_ub, mesh=mesh)
-        attempts.append(_attempt(r))
-        if not r.success:
-            break
-        current = r
-        t_re, margin = _resim_margin(p, current)
-        if margin.min() >= -REFINE_TOL_MPS or round_ == REFINE_ROUNDS:
-            break
-        hot.extend(violation_times(t_re, margin, REFINE_TOL_MPS))
-        mesh = refined_mesh(np.linspace(0.0, current.t_f_s, p.n_intervals + 1), np.array(hot))
-    sol = PlanarSolution(problem=p, result=current, attempts=attempts, solve_s=0.0, check={})
+    result = multistart_refined(initial_guesses(p, p.n_coarse), solve_start, refinement_for, REFINE_ROUNDS,
+                                attempts, stop=families_agree(_family, AGREE_REL))  # fmt: skip
+    sol = PlanarSolution(problem=p, result=result, attempts=attempts, solve_s=0.0, check={})
     sol.check = resimulation_check(sol)
     sol.solve_s = time.perf_counter() - t0
     return sol
