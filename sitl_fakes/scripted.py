@@ -4,12 +4,16 @@ MAVLink, flying on the event loop's clock — virtual under ``sitl_fakes.virtual
 The UDP fake (``sitl_fakes.app``) is PX4 as MAVSDK sees it, in real time; this one is PX4 as the runner
 sees it, in virtual time, so that every way a flight ends can be tested deterministically and in a
 fraction of a second (px4-ros2-interface-lib's ``fake_autopilot`` and RotorPy's ``simulate()`` are the
-models). It keeps what the runner's decisions depend on:
+models). It keeps what the runner's decisions depend on, for PX4 (``autopilot=PX4``) or ArduCopter
+(``autopilot=ARDUPILOT``), each with its own mode names and parameters (``flighttest.flying.autopilot``):
 
-- PX4's mode names and transitions: takeoff ends in HOLD, ``offboard stop`` goes to HOLD, Land
-  descends at ``land_speed_mps`` and disarms on the ground, a pilot mode holds where the pilot is;
-- offboard needs a setpoint before it starts, and setpoints missing for ``COM_OF_LOSS_T`` send PX4 to
-  HOLD (its offboard-loss failsafe);
+- the modes and their transitions: PX4's takeoff ends in HOLD and ``offboard stop`` goes to HOLD;
+  ArduCopter takes off in GUIDED and stays there, and its hold is BRAKE; Land descends at
+  ``land_speed_mps`` (ArduCopter's LAND_SPD_MS) and disarms on the ground; a pilot mode holds where the
+  pilot is;
+- offboard needs a setpoint before it starts; setpoints missing for ``COM_OF_LOSS_T`` send PX4 to HOLD
+  (its offboard-loss failsafe), while ArduCopter only zeroes its targets after ``GUID_TIMEOUT`` and
+  brakes, still in GUIDED;
 - a position loop (P on position, velocity feed-forward, P on velocity, acceleration feed-forward,
   bounded acceleration) — not the dynamics: a level vehicle with yaw 0, so body axes are NED's;
 - telemetry at ``telemetry_hz`` with a little seeded noise on rates and acceleration (the guard's hover
@@ -31,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from flighttest.flying.autopilot import ARDUPILOT, PX4, rules_for
 from flighttest.flying.link import TelemetryState
 
 G_MPS2 = 9.80665
@@ -38,7 +43,12 @@ PX4_PARAMS: dict[str, float | int] = {
     "COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0, "COM_RC_OVERRIDE": 1, "MPC_Z_VEL_MAX_DN": 1.5, "MPC_Z_P": 1.0,
     "MPC_XY_P": 0.95, "MPC_ACC_DECOUPLE": 1,
 }  # fmt: skip
-PILOT_MODES = ("MANUAL", "ALTCTL", "POSCTL", "STABILIZED", "ACRO")
+# ArduCopter master's defaults (../shared/ardupilot_sitl, the DataFlash PARM records)
+ARDUPILOT_PARAMS: dict[str, float | int] = {
+    "GUID_TIMEOUT": 3.0, "FS_GCS_ENABLE": 0, "FS_GCS_TIMEOUT": 5.0, "MAV_GCS_SYSID": 255, "WP_SPD_DN": 1.5,
+    "WP_SPD_UP": 2.5, "WP_ACC_Z": 1.0, "WP_ACC": 2.5, "WP_JERK": 1.0, "PSC_JERK_D": 5.0, "LAND_SPD_MS": 0.5,
+    "FENCE_ENABLE": 0, "DISARM_DELAY": 10, "PSC_D_POS_P": 1.0,
+}  # fmt: skip
 
 
 @dataclass
@@ -76,8 +86,8 @@ class ScriptedAutopilot:
     rate_noise_rps: float = 0.01
     accel_noise_mps2: float = 0.05
     seed: int = 0
-    params: dict[str, float | int] = field(default_factory=lambda: dict(PX4_PARAMS))
-    autopilot: str | None = "PX4"
+    autopilot: str | None = PX4  # or ARDUPILOT: its modes, its parameters, no offboard-loss failsafe
+    params: dict[str, float | int] | None = None  # None: the autopilot's defaults above
     offboard_loss_failsafe: bool = True  # False: a vehicle that stays in OFFBOARD with no setpoint (a test's)
     # switches a script sets
     unanswered: set[str] = field(default_factory=set)  # commands never acknowledged (the caller times out)
@@ -87,6 +97,16 @@ class ScriptedAutopilot:
     realtime = False  # its clock is the loop's, virtual in tests: no wall-clock watchdog may judge it
 
     def __post_init__(self) -> None:
+        self.rules = rules_for(self.autopilot)
+        ardupilot = self.rules.name == ARDUPILOT
+        if self.params is None:
+            self.params = dict(ARDUPILOT_PARAMS if ardupilot else PX4_PARAMS)
+        # ArduCopter takes off in GUIDED and stays there; PX4 has a mode for it and holds after it
+        self.takeoff_mode = self.rules.offboard_mode if ardupilot else "TAKEOFF"
+        self.after_takeoff_mode = self.rules.offboard_mode if ardupilot else self.rules.hold_mode
+        if ardupilot:
+            self.land_speed_mps = float(self.params.get("LAND_SPD_MS", self.land_speed_mps))
+        self.taking_off = False
         self.state = TelemetryState()
         self.on_posvel: list[Callable[[float], None]] = []
         self.on_attitude: list[Callable[[float], None]] = []
@@ -97,7 +117,7 @@ class ScriptedAutopilot:
         self.p_ned = np.zeros(3)
         self.v_ned = np.zeros(3)
         self.a_ned = np.zeros(3)
-        self.mode = "HOLD"
+        self.mode = "STABILIZE" if ardupilot else self.rules.hold_mode  # what each is in on the ground
         self.armed = False
         self.hold_ned = np.zeros(3)
         self.takeoff_alt_m = 2.5
@@ -132,6 +152,7 @@ class ScriptedAutopilot:
         """The pilot flips the mode switch: the vehicle holds where it is, under the sticks."""
         self.hold_ned = self.p_ned.copy()
         self.mode = mode
+        self.taking_off = False
 
     def lose_link(self) -> None:
         """Nothing in either direction from now on: no telemetry, no setpoint, no command answered.
@@ -257,14 +278,16 @@ class ScriptedAutopilot:
             if not self.armed:
                 raise RuntimeError(f"{what}: denied (disarmed)")
             self.hold_ned = np.array([self.p_ned[0], self.p_ned[1], -self.takeoff_alt_m])
-            self.mode = "TAKEOFF"
+            self.mode = self.takeoff_mode
+            self.taking_off = True
 
         await self._command("takeoff", what, timeout_s, effect)
 
     async def land(self, timeout_s: float, what: str = "land") -> None:
         def effect() -> None:
             self.hold_ned = self.p_ned.copy()
-            self.mode = "LAND"
+            self.mode = self.rules.land_mode
+            self.taking_off = False
 
         await self._command("land", what, timeout_s, effect)
 
@@ -275,7 +298,8 @@ class ScriptedAutopilot:
         def effect() -> None:
             if self.setpoint is None:  # PX4 refuses offboard without a setpoint stream
                 raise RuntimeError(f"{what}: no setpoint")
-            self.mode = "OFFBOARD"
+            self.mode = self.rules.offboard_mode
+            self.taking_off = False
 
         await self._command("start_offboard", what, timeout_s, effect)
 
@@ -284,7 +308,8 @@ class ScriptedAutopilot:
 
     def _enter_hold(self) -> None:
         self.hold_ned = self.p_ned.copy()
-        self.mode = "HOLD"
+        self.mode = self.rules.hold_mode
+        self.taking_off = False
 
     # -- the vehicle ---------------------------------------------------------------------------------
     async def _run(self) -> None:
@@ -304,14 +329,14 @@ class ScriptedAutopilot:
         """The velocity the position loop asks for, and the acceleration fed forward."""
         kp, zero = self.position_gain_per_s, np.zeros(3)
         sp = self.setpoint
-        if self.mode == "OFFBOARD" and sp is not None:
+        if self.mode == self.rules.offboard_mode and sp is not None and not self.taking_off:
             if sp.velocity_only:
                 return sp.v_ned, zero
             return sp.v_ned + kp * (sp.p_ned - self.p_ned), sp.a_ned
         v = kp * (self.hold_ned - self.p_ned)
-        if self.mode == "TAKEOFF":
+        if self.taking_off:
             v[2] = max(v[2], -self.takeoff_speed_mps)
-        elif self.mode == "LAND":
+        elif self.mode == self.rules.land_mode:
             v[2] = self.land_speed_mps
         return v, zero
 
@@ -320,9 +345,15 @@ class ScriptedAutopilot:
         sp = self.setpoint
         if sp is not None and self.resending and self.link_up:
             sp.t_s = now
-        loss_s = float(self.params.get("COM_OF_LOSS_T", 1.0))
-        if self.mode == "OFFBOARD" and self.offboard_loss_failsafe and (sp is None or now - sp.t_s > loss_s):
-            self._enter_hold()  # PX4's offboard-loss failsafe (COM_OBL_RC_ACT 0 without RC: Hold)
+        if self.mode == self.rules.offboard_mode and not self.taking_off:
+            if self.rules.offboard_loss_failsafe:
+                loss_s = float(self.params.get("COM_OF_LOSS_T", 1.0))
+                if self.offboard_loss_failsafe and (sp is None or now - sp.t_s > loss_s):
+                    self._enter_hold()  # PX4's offboard-loss failsafe (COM_OBL_RC_ACT 0 without RC: Hold)
+            elif sp is not None and now - sp.t_s > float(self.params.get("GUID_TIMEOUT", 3.0)):
+                # ArduCopter's GUID_TIMEOUT: targets zeroed, it brakes and holds, still in GUIDED
+                self.setpoint = None
+                self.hold_ned = self.p_ned.copy()
         if not self.armed:
             self.v_ned[:] = 0.0
             self.a_ned[:] = 0.0
@@ -344,16 +375,17 @@ class ScriptedAutopilot:
             self.p_ned[2] = 0.0
             self.v_ned[2] = min(self.v_ned[2], 0.0)
             self.v_ned[:2] = 0.0
-            if self.mode == "TAKEOFF" or self.v_ned[2] < 0:
+            if self.taking_off or self.v_ned[2] < 0:
                 self._ground_since = None
             else:
                 self._ground_since = now if self._ground_since is None else self._ground_since
-                if self.mode == "LAND" and now - self._ground_since >= self.disarm_after_s:
+                if self.mode == self.rules.land_mode and now - self._ground_since >= self.disarm_after_s:
                     self.armed = False
         else:
             self._ground_since = None
-        if self.mode == "TAKEOFF" and abs(self.p_ned[2] - self.hold_ned[2]) < 0.1:
-            self.mode = "HOLD"
+        if self.taking_off and abs(self.p_ned[2] - self.hold_ned[2]) < 0.1:
+            self.taking_off = False
+            self.mode = self.after_takeoff_mode
 
     def _script(self) -> None:
         now = self.now()
@@ -376,7 +408,7 @@ class ScriptedAutopilot:
             self._report_connection(True)
         st.armed = self.armed
         in_air = self.armed and not (self.p_ned[2] >= -0.05 and self._ground_since is not None) and (
-            self.p_ned[2] < -0.05 or self.mode == "TAKEOFF")
+            self.p_ned[2] < -0.05 or self.taking_off)
         st.in_air = in_air
         st.landed_state = "IN_AIR" if in_air else "ON_GROUND"
         if st.flight_mode != self.mode:

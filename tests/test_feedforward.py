@@ -66,7 +66,8 @@ def test_catch_up_limit_bounds_the_descent_the_position_error_adds():
 
 @pytest.mark.parametrize(
     ("params", "autopilot", "gain"),
-    [({"MPC_Z_P": 1.5}, "PX4", 1.5), ({"PSC_POSZ_P": 0.8}, "ArduPilot", 0.8), ({}, "PX4", 1.0), (None, None, 1.0),
+    [({"MPC_Z_P": 1.5}, "PX4", 1.5), ({"PSC_POSZ_P": 0.8}, "ArduPilot", 0.8), ({"PSC_D_POS_P": 0.7}, "ArduPilot", 0.7),
+     ({"PSC_D_POS_P": 0.7, "PSC_POSZ_P": 0.8}, "ArduPilot", 0.7), ({}, "PX4", 1.0), (None, None, 1.0),
      ({"MPC_Z_P": "x"}, "PX4", 1.0), ({"MPC_Z_P": 0.0}, "PX4", 1.0), ({"MPC_Z_P": float("nan")}, "PX4", 1.0)],
 )
 def test_z_position_gain_from_the_autopilots_parameters(params, autopilot, gain):

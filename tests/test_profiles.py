@@ -1,6 +1,7 @@
 """Vehicle profiles: shipped ones load, bad ones fail with one line naming file and field."""
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -91,3 +92,17 @@ def test_malformed_toml_and_unknown_name(tmp_path):
         load_profile(str(f))
     with pytest.raises(FlighttestError, match="unknown vehicle 'nope'"):
         load_profile("nope")
+
+
+def test_arducopter_sitl_profile_is_sitls_default_quad():
+    p = load_profile("arducopter_sitl")
+    # SIM_Frame's default model: 3.0 kg, 0.35 m motor-to-motor, disc area 0.385 m² for four 0.35 m rotors
+    assert (p.mass_kg, p.n_rotors, p.arm_length_m * 2) == (3.0, 4, 0.35)
+    assert 4 * math.pi * (p.rotor_diameter_m / 2) ** 2 == pytest.approx(0.385, rel=0.01)
+    # SITL's inertia when none is given: m/4 (d/2)², m/2 (d/2)²
+    assert p.inertia_kgm2[0] == pytest.approx(3.0 * 0.25 * 0.175**2, rel=1e-3)
+    assert p.inertia_kgm2[2] == pytest.approx(3.0 * 0.5 * 0.175**2, rel=1e-3)
+    # hover at MOT_THST_HOVER 0.39 of full thrust; ATC_ANGLE_MAX 30°, WP_SPD_UP 2.5 m/s
+    assert 1.0 / p.thrust_to_weight == pytest.approx(0.39, abs=0.002)
+    assert (p.max_tilt_deg, p.max_climb_mps) == (30.0, 2.5)
+    assert Path(p.path).read_text().count("ASSUMPTION") >= 4  # what SITL has no figure for says so

@@ -19,10 +19,12 @@ from typing import Any
 import pytest
 
 from flighttest.flying import guard as gd
+from flighttest.flying.autopilot import ARDUPILOT
 from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
 from flighttest.flying.missions_config import mission_config_from_dict
 from flighttest.flying.runner import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, FlightOutcome, FlyRequest, MissionRunner
 from flighttest.model.profiles import load_profile
+from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
 from sitl_fakes.scripted import ScriptedAutopilot
 from sitl_fakes.virtual_time import run_virtual
 
@@ -297,3 +299,75 @@ def test_an_exception_in_the_flow_still_lands_and_writes_the_log(tmp_path):
     assert f.summary["abort_verdict"] == "exception"
     assert any(e["event"] == "exception" and "denied" in e["error"] for e in f.events)
     assert f.ladder()[-1] == ("DONE", "landed") and not f.ap.armed
+
+
+# -- ArduCopter: its modes, its hold, its pilots, its preflight (issue 15) ---------------------------------
+
+# what the preflight tells the user to set for this plan (the vertical's 1.47 m/s²), and nothing more
+AP_READY = {**AP_DEFAULTS, "WP_ACC_Z": 1.5}
+
+
+def fly_ap(tmp_path: Path, script=None, land: bool = True, **autopilot: Any) -> Flight:
+    autopilot.setdefault("params", dict(AP_READY))
+    return fly(tmp_path, script, land, autopilot=ARDUPILOT, **autopilot)
+
+
+def test_ardupilot_defaults_are_refused_before_arming_with_the_value_to_set(tmp_path):
+    f = fly(tmp_path, autopilot=ARDUPILOT)
+    assert f.outcome.outcome == "refused" and f.outcome.exit_code == 2
+    assert f.outcome.abort_reason.startswith("preflight failed: WP_ACC_Z: 1 m/s²")
+    assert "set WP_ACC_Z to 1.5" in f.outcome.abort_reason
+    assert "arm" not in [c for _, c in f.ap.commands]
+    checks = {c["name"]: c for c in json.loads((Path(f.outcome.log_dir) / "preflight.json").read_text())["checks"]}
+    assert checks["FS_GCS_ENABLE"]["status"] == "warn" and checks["MAV_GCS_SYSID"]["status"] == "warn"
+    assert "set MAV_GCS_SYSID to 245" in checks["MAV_GCS_SYSID"]["requirement"]
+    assert "COM_OF_LOSS_T" not in checks  # PX4's table is not asked of ArduPilot
+
+
+def test_ardupilot_flies_the_descent_in_guided_and_lands(tmp_path):
+    f = fly_ap(tmp_path)
+    assert f.outcome.outcome == "completed" and f.outcome.descent_time_s is not None
+    assert [c for _, c in f.ap.commands] == ["arm", "set_takeoff_altitude", "takeoff", "start_offboard", "land"]
+    autopilot = next(e for e in f.events if e["event"] == "autopilot")
+    assert autopilot["offboard_mode"] == "GUIDED" and autopilot["hold_mode"] == "BRAKE"
+    assert {e["new"] for e in f.events if e["event"] == "mode"} == {"GUIDED", "LAND"}
+    assert f.summary["final_mode"] == "LAND" and not f.ap.armed
+
+
+def test_ardupilot_abort_brakes_then_lands(tmp_path):
+    def script(ap, runner):
+        ap.after(in_phase(runner, "stream"), 1.0, lambda: ap.push((0.0, 0.0, 14.0), 0.4))
+
+    f = fly_ap(tmp_path, script)
+    assert [r for r, _ in f.ladder()] == ["RECOVER", "HOLD", "LAND", "DONE"]
+    # its hold rung is BRAKE, asked for as such: "offboard stop" would leave it in a pilot's mode
+    assert f.heard_after(f.t_of("abort")) == ["hold", "land"]
+    assert [e["new"] for e in f.events if e["event"] == "mode" and e["t_s"] > f.t_of("abort")] == ["BRAKE", "LAND"]
+    assert f.ladder()[-1] == ("DONE", "landed") and not f.ap.armed
+
+
+@pytest.mark.parametrize("mode", ["LOITER", "ALT_HOLD", "POSHOLD", "STABILIZE"])
+def test_ardupilot_pilot_modes_mid_descent_are_a_takeover(tmp_path, mode):
+    def script(ap, runner):
+        ap.after(in_phase(runner, "stream"), 1.0, lambda: ap.pilot(mode))
+
+    f = fly_ap(tmp_path, script)
+    assert f.outcome.abort_reason == f"pilot took over ({mode})"
+    assert f.ladder()[-1] == ("DONE", f"pilot in control ({mode})")
+    assert f.heard_after(f.t_of("mode", new=mode)) == [] and f.ap.mode == mode and f.ap.armed
+
+
+def test_ardupilot_no_land_ends_braking_in_the_air(tmp_path):
+    f = fly_ap(tmp_path, land=False)
+    assert f.outcome.outcome == "completed" and f.ap.mode == "BRAKE" and f.ap.armed
+    assert [c for _, c in f.ap.commands][-1] == "hold"
+
+
+def test_ardupilot_link_lost_stays_in_guided_braking_after_guid_timeout(tmp_path):
+    def script(ap, runner):
+        ap.after(in_phase(runner, "stream"), 1.0, ap.lose_link)
+
+    f = fly_ap(tmp_path, script)
+    assert "the vehicle's own failsafe is in charge" in f.ladder()[-1][1]
+    # no offboard-loss mode change on ArduPilot: GUID_TIMEOUT zeroes the targets, it holds in GUIDED
+    assert f.ap.mode == "GUIDED" and f.ap.armed and f.ap.setpoint is None and f.ap.speed_mps < 0.05

@@ -69,6 +69,14 @@ RELEVANT: dict[str, tuple[str, ...]] = {
         "WP_JERK",
         "LAND_SPD_MS",
         "LAND_SPD_HIGH_MS",
+        "WP_SPD_UP",
+        "WP_SPD",
+        "PSC_D_*",
+        "PSC_NE_POS_P",
+        "PSC_JERK_*",
+        "MAV_GCS_SYSID",
+        "FENCE_ENABLE",
+        "DISARM_DELAY",
     ),
 }
 _ALL_PATTERNS = tuple(p for patterns in RELEVANT.values() for p in patterns)

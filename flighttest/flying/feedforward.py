@@ -79,14 +79,16 @@ def for_autopilot(traj: Trajectory, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)) -
     return Trajectory(df, dict(traj.meta))
 
 
-# the autopilot's vertical position gain (velocity per metre of position error), by autopilot
-Z_POSITION_GAIN_PARAMS = {"PX4": "MPC_Z_P", "ArduPilot": "PSC_POSZ_P"}
+# the autopilot's vertical position gain (velocity per metre of position error), by autopilot, newest name
+# first: ArduPilot master (2026, ../shared/ardupilot_sitl) calls it PSC_D_POS_P, 4.x PSC_POSZ_P
+Z_POSITION_GAIN_PARAMS = {"PX4": ("MPC_Z_P",), "ArduPilot": ("PSC_D_POS_P", "PSC_POSZ_P")}
 DEFAULT_Z_POSITION_GAIN_PER_S = 1.0  # both autopilots' default
 
 
 def z_position_gain_per_s(params: dict | None, autopilot: str | None) -> float:
     """The vertical position gain the autopilot uses, from its parameters (else both defaults' 1/s)."""
-    name = Z_POSITION_GAIN_PARAMS.get(autopilot or "", "MPC_Z_P")
+    names = Z_POSITION_GAIN_PARAMS.get(autopilot or "", ("MPC_Z_P",))
+    name = next((n for n in names if n in (params or {})), names[0])
     try:
         gain = float((params or {})[name])
     except (KeyError, TypeError, ValueError):

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 from flighttest.analysis.fluctuation import LIVE_MIN_SAMPLES, LIVE_MIN_SPAN_FRACTION, fluct_threshold, hover_baseline
+from flighttest.flying.autopilot import PX4_RULES, AutopilotRules
 from flighttest.model.aero import G_MPS2
 from flighttest.model.frames import GuardRegion
 
@@ -437,9 +438,9 @@ CMD_RECOVER = "recover"
 CMD_HOLD = "hold"
 CMD_LAND = "land"
 
-# MAVSDK flight modes in which a person flies the vehicle: seen during the ladder, flighttest stops
-# sending anything (README "Aborting by hand": the pilot took over)
-PILOT_MODES = frozenset({"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE"})
+# PX4's modes in which a person flies the vehicle: seen during the ladder, flighttest stops sending anything
+# (README "Aborting by hand": the pilot took over); each autopilot's own are its rules'
+PILOT_MODES = PX4_RULES.pilot_modes
 
 
 @dataclass(frozen=True)
@@ -461,7 +462,7 @@ class LadderObservation:
     vd_mps: float = math.nan
     region_ok: bool = True
     telemetry_fresh: bool = True
-    mode: str = ""  # MAVSDK FlightMode name, e.g. "OFFBOARD", "HOLD", "LAND"
+    mode: str = ""  # the autopilot's mode name (flighttest.flying.autopilot), e.g. "HOLD" / "BRAKE", "LAND"
     landed: bool = False
     link_ok: bool = True
     heard_age_s: float = 0.0  # since anything was last heard from the vehicle (a state sample)
@@ -473,6 +474,7 @@ class AbortLadder:
     (or ``None``); rungs only go up. The first trigger's reason is *the* abort reason."""
 
     timing: LadderTiming = field(default_factory=LadderTiming)
+    rules: AutopilotRules = PX4_RULES  # which modes hold, land, and mean a pilot (set once the vehicle is known)
     rung: Rung = Rung.NOMINAL
     reason: str = ""
     entered_t: float = 0.0
@@ -535,7 +537,7 @@ class AbortLadder:
         if self.rung in (Rung.NOMINAL, Rung.DONE):
             return None
         # on every rung: a pilot mode means a person has the sticks, and anything sent would fight them
-        if ob.mode in PILOT_MODES:
+        if ob.mode in self.rules.pilot_modes:
             return self._enter(t, Rung.DONE, f"pilot took over ({ob.mode}): sending nothing more")
         # nothing can reach the vehicle any more: PX4's own failsafe (offboard loss, data-link loss) flies it
         if not ob.link_ok and ob.heard_age_s > tm.link_give_up_s:
@@ -554,13 +556,13 @@ class AbortLadder:
         elif self.rung == Rung.HOLD:
             if ob.landed:
                 return self._enter(t, Rung.DONE, "on the ground")
-            if ob.mode == "HOLD":
+            if ob.mode == self.rules.hold_mode:
                 self._hold_seen_t = t if self._hold_seen_t is None else self._hold_seen_t
                 if not tm.land:
                     return self._enter(t, Rung.DONE, "holding (--no-land)")
                 if t - self._hold_seen_t >= tm.hold_dwell_s:
                     return self._enter(t, Rung.LAND, "hold dwell over")
-            elif ob.mode == "LAND":  # the autopilot chose to land itself: follow it, send nothing
+            elif ob.mode == self.rules.land_mode:  # the autopilot chose to land itself: follow it, send nothing
                 self._enter(t, Rung.LAND, "autopilot landing")
                 return None
             elif t - self.entered_t >= tm.hold_confirm_s:
@@ -591,7 +593,7 @@ class AbortLadder:
             else:
                 self.note(t, f"{watch} during Land: Land was just sent, re-sending in {tm.land_retry_s:g} s")
         # the mode cannot be trusted while the telemetry is stale: keep asking
-        if (watch or ob.mode != "LAND") and t - self._last_land_t >= tm.land_retry_s:
+        if (watch or ob.mode != self.rules.land_mode) and t - self._last_land_t >= tm.land_retry_s:
             self._last_land_t = t
             self.note(t, f"re-sending Land ({watch or 'mode ' + (ob.mode or 'unknown')})")
             return CMD_LAND

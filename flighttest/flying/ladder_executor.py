@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from flighttest.flying import guard as gd
+from flighttest.flying.autopilot import AutopilotRules
 from flighttest.flying.link import Link
 from flighttest.flying.missions_config import AbortConfig
 from flighttest.flying.outcome import OFFBOARD_FLOW, Phase
@@ -31,6 +32,7 @@ class LadderHost(Protocol):
     """What the executor needs of the flight it ends (``flighttest.flying.runner.MissionRunner``)."""
 
     phase: str  # the nominal flow's phase: where the flight was when it aborted
+    rules: AutopilotRules  # the vehicle's autopilot: its offboard mode, how to reach its hold mode
     origin: tuple[float, float, float] | None  # the trajectory's start point, once settled there
     last_decision: gd.Decision | None
 
@@ -106,9 +108,10 @@ class LadderExecutor:
 
     async def execute(self, cmd: str) -> None:
         host, st = self.host, self.link.state
+        rules = host.rules
         host.event("ladder_command", command=cmd)
         if cmd == gd.CMD_RECOVER:
-            if st.flight_mode != "OFFBOARD" or host.phase not in OFFBOARD_FLOW:
+            if st.flight_mode != rules.offboard_mode or host.phase not in OFFBOARD_FLOW:
                 nxt = self.ladder.escalate(host.now(), f"not in offboard ({st.flight_mode})")
                 if nxt:
                     await self.execute(nxt)
@@ -121,7 +124,7 @@ class LadderExecutor:
             if math.isfinite(st.n_m):
                 yaw = self.streamer.last.yaw_deg if self.streamer.last else 0.0
                 self.streamer.leave_hold(st.n_m, st.e_m, st.d_m, yaw, "abort_hold")
-            if st.flight_mode == "OFFBOARD":
+            if st.flight_mode == rules.offboard_mode and rules.hold_by_offboard_stop:
                 self._send(cmd, lambda: self.link.stop_offboard(COMMAND_TIMEOUT_S, "offboard stop (hold)"))
             else:
                 self._send(cmd, lambda: self.link.hold(COMMAND_TIMEOUT_S))

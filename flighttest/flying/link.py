@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import math
 import re
 import time
@@ -26,12 +27,23 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from flighttest.errors import FlighttestError
+from flighttest.flying.autopilot import ARDUPILOT, PX4_RULES, AutopilotRules, arducopter_mode_name, rules_for
 
 # what the streamer calls on MAVSDK's synchronous offboard plugin (VehicleLink.offboard_setters)
 OFFBOARD_SETTERS = ("set_position_velocity_acceleration_ned", "set_velocity_ned")
 URL_RE = re.compile(r"^(udpin|udpout|tcpin|tcpout|udp|tcp|serial|serial_flowcontrol)://.+$")
 URL_HELP = "udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT or serial:///dev/ttyUSB0:57600"
-GCS_SYSID = 245  # QGroundControl uses 255; MAVSDK's ground-station default is 245
+# flighttest's own identity as a ground station: MAVSDK's 245 (component 190), not QGroundControl's 255, so
+# both can share a link (mavlink-router) without answering for each other. ArduPilot's GCS failsafe watches
+# only MAV_GCS_SYSID (default 255): its preflight tells the user to set it to this one.
+GCS_SYSID = 245
+GCS_COMPID = 190  # MAV_COMP_ID_MISSIONPLANNER
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+SYS_STATUS_MSG_ID = 1
+# SYS_STATUS carries the sensor-health bits MAVSDK's health (and the preflight) is made of: ArduPilot
+# streams nothing unless asked (../shared/ardupilot_sitl: without it MAVSDK's health stayed false)
+SYS_STATUS_HZ = 2.0
+AUTOPILOT_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
 LISTEN_SCHEMES = ("udpin", "tcpin", "udp")  # MAVSDK's deprecated udp:// listens, tcp:// connects
 SERIAL_SCHEMES = ("serial", "serial_flowcontrol")
 MAX_BAUD = 20_000_000  # beyond any UART a flight controller has (PX4 tops out at 3 Mbit/s)
@@ -248,6 +260,7 @@ class Link(Protocol):
     on_connection: list[Callable[[bool], None]]
     # False where the loop's clock is virtual: no wall-clock watchdog thread may judge the stream
     realtime: bool
+    rules: AutopilotRules  # the autopilot's rules (flighttest.flying.autopilot), known once open
 
     async def open(self) -> None: ...
     async def close(self) -> None: ...
@@ -304,6 +317,8 @@ class VehicleLink:
         self._log_seen: dict[str, int] = {}
         self._loop: asyncio.AbstractEventLoop | None = None
         self.realtime = True
+        self.rules: AutopilotRules = PX4_RULES  # the autopilot's, once connected
+        self.direct = None
 
     # -- lifecycle ---------------------------------------------------------------------------------
     async def __aenter__(self) -> VehicleLink:
@@ -371,6 +386,7 @@ class VehicleLink:
 
     def _make_plugins(self) -> None:
         from mavsdk.asyncio.plugins.action import ActionAsync
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.asyncio.plugins.offboard import OffboardAsync
         from mavsdk.asyncio.plugins.param import ParamAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
@@ -379,6 +395,7 @@ class VehicleLink:
         self.action = ActionAsync(self.system)
         self.offboard = OffboardAsync(self.system)
         self.param = ParamAsync(self.system)
+        self.direct = MavlinkDirectAsync(self.system)
 
     def offboard_setters(self):
         """MAVSDK's synchronous offboard plugin under ``OffboardAsync``: its setters only store the
@@ -483,6 +500,9 @@ class VehicleLink:
     async def _start_subscriptions(self) -> None:
         tel, st = self.telemetry, self.state
         hz = self.telemetry_hz
+        self.rules = rules_for(await self.autopilot_name())
+        if self.rules.name == ARDUPILOT:
+            await self.request_message_rate(SYS_STATUS_MSG_ID, SYS_STATUS_HZ, "SYS_STATUS")
         for setter in (tel.set_rate_position_velocity_ned, tel.set_rate_attitude_quaternion, tel.set_rate_imu):
             try:
                 await self.call(setter(hz), setter.__name__, 5.0)
@@ -528,11 +548,23 @@ class VehicleLink:
             if all(math.isfinite(x) for x in vals):
                 st.wind_ned_mps, st.t_wind = vals, t
 
-        def mode(m) -> None:
-            old, st.flight_mode = st.flight_mode, m.name
-            if old != m.name:
+        def set_mode(name: str) -> None:
+            old, st.flight_mode = st.flight_mode, name
+            if old != name:
                 for cb in self.on_mode:
-                    cb(old, m.name)
+                    cb(old, name)
+
+        def mode(m) -> None:
+            set_mode(m.name)
+
+        target = self.target_sysid
+
+        def heartbeat(msg) -> None:  # ArduPilot: its own mode names (flighttest.flying.autopilot)
+            if msg.system_id != target or msg.component_id != AUTOPILOT_COMPID:
+                return
+            custom_mode = json.loads(msg.fields_json).get("custom_mode")
+            if custom_mode is not None:
+                set_mode(arducopter_mode_name(custom_mode))
 
         def armed(a) -> None:
             st.armed = bool(a)
@@ -562,7 +594,6 @@ class VehicleLink:
             (tel.subscribe_attitude_quaternion, attitude),
             (tel.subscribe_imu, imu),
             (tel.subscribe_wind, wind),
-            (tel.subscribe_flight_mode, mode),
             (tel.subscribe_armed, armed),
             (tel.subscribe_landed_state, landed),
             (tel.subscribe_in_air, in_air),
@@ -571,6 +602,14 @@ class VehicleLink:
             (tel.subscribe_health_all_ok, health_ok),
             (self.system.is_connected_state, connection),
         ]
+        if self.rules.reads_mode_from_heartbeat:
+
+            def subscribe_heartbeat():
+                return self.direct.subscribe_message("HEARTBEAT")
+
+            subs.append((subscribe_heartbeat, heartbeat))
+        else:
+            subs.append((tel.subscribe_flight_mode, mode))
         for factory, handler in subs:
             self._sub_tasks.append(asyncio.create_task(self._pump(factory, handler), name=factory.__name__))
 
@@ -594,6 +633,23 @@ class VehicleLink:
                 return True
             await asyncio.sleep(poll_s)
         return predicate(self.state)
+
+    async def request_message_rate(self, msg_id: int, rate_hz: float, what: str) -> None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL for a message MAVSDK has no rate setter for (SYS_STATUS on ArduPilot);
+        a failure is a warning: the preflight reports what actually arrives."""
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        fields = {"target_system": self.target_sysid, "target_component": AUTOPILOT_COMPID,
+                  "command": MAV_CMD_SET_MESSAGE_INTERVAL, "confirmation": 0, "param1": float(msg_id),
+                  "param2": 1e6 / rate_hz, "param3": 0.0, "param4": 0.0, "param5": 0.0, "param6": 0.0,
+                  "param7": 0.0}  # fmt: skip
+        cmd = MavlinkMessage("COMMAND_LONG", GCS_SYSID, GCS_COMPID, self.target_sysid, AUTOPILOT_COMPID,
+                             json.dumps(fields))  # fmt: skip
+        try:
+            await self.call(self.direct.send_command(cmd), f"{what} rate", 5.0)
+            self._on_event("stream_requested", {"message": what, "rate_hz": rate_hz})
+        except Exception as exc:
+            self._on_event("warning", {"what": f"requesting {what} at {rate_hz:g} Hz failed: {exc}"})
 
     # -- params --------------------------------------------------------------------------------------
     async def get_param(self, name: str, kind: str = "float") -> float | int | None:

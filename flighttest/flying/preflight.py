@@ -82,6 +82,10 @@ class TrajectoryStats:
     guard_margin_t_s: float
     rise_max_m: float = 0.0  # highest point above the start (-d_m min)
     problem: str = ""  # why the trajectory itself is not sound (re-checked here), "" if it is
+    # what an autopilot that shapes its targets (ArduCopter's GUIDED) must allow for the plan to be flown
+    climb_max_mps: float = 0.0  # largest -vd
+    accel_z_max_mps2: float = 0.0  # largest |ad|
+    accel_h_max_mps2: float = 0.0  # largest |(an, ae)|
 
 
 def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: float) -> TrajectoryStats:
@@ -122,6 +126,9 @@ def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: f
         guard_margin_t_s=float(df["t_s"].iloc[i] - df["t_s"].iloc[0]),
         rise_max_m=float(max(0.0, -d.min())),
         problem=problem,
+        climb_max_mps=float(max(0.0, -vd.min())),
+        accel_z_max_mps2=float(np.abs(ad).max()),
+        accel_h_max_mps2=float(np.hypot(an, ae).max()),
     )
 
 
@@ -268,4 +275,90 @@ def param_checks(params: dict[str, float | int | None], descent_max_mps: float, 
         if v > w_allow_mps:
             out.append(Check("PX4 descents after an abort", WARN, f"MPC_Z_VEL_MAX_DN {v:g} m/s",
                              f"Hold/Return descents stay below w_allow {w_allow_mps:.2f} m/s"))  # fmt: skip
+    return out
+
+
+# ArduCopter's parameters the preflight reads (names of ArduPilot master, 2026: ../shared/ardupilot_sitl)
+ARDUPILOT_PARAMS = {"GUID_TIMEOUT": "float", "FS_GCS_ENABLE": "int", "FS_GCS_TIMEOUT": "float",
+                    "MAV_GCS_SYSID": "int", "WP_SPD_DN": "float", "WP_SPD_UP": "float", "WP_ACC_Z": "float",
+                    "WP_ACC": "float", "WP_JERK": "float", "PSC_JERK_D": "float", "LAND_SPD_MS": "float",
+                    "FENCE_ENABLE": "int", "DISARM_DELAY": "int"}  # fmt: skip
+# FS_GCS_ENABLE values (ArduCopter): what the vehicle does when the ground station's heartbeats stop
+GCS_FS_ACTIONS = {0: "off", 1: "RTL", 2: "continue the mission in AUTO, else RTL", 3: "SmartRTL or RTL",
+                  4: "SmartRTL or Land", 5: "Land", 6: "Auto DO_LAND_START or RTL", 7: "Brake or Land"}  # fmt: skip
+JERK_RAMP_MAX_S = 0.5  # an acceleration step smoothed over longer than this lags the plan noticeably
+GUIDED_SHAPING = "GUIDED shapes the setpoints with it: the vehicle falls behind, then overshoots into the guard"
+
+
+def _need(name: str, value: float | int | None, need: float, unit: str, why: str) -> Check:
+    """``value`` ≥ ``need``, else a failure that names the value to set."""
+    if value is None:
+        return Check(name, WARN, "not reported", f"≥ {need:.2f} {unit} ({why})")
+    ok = float(value) + 1e-6 >= need
+    return Check(name, PASS if ok else FAIL, f"{float(value):g} {unit}",
+                 f"≥ {need:.2f} {unit}" + ("" if ok else f": set {name} to {math.ceil(need * 10) / 10:g}")
+                 + f" ({why})")  # fmt: skip
+
+
+def ardupilot_param_checks(params: dict[str, float | int | None], stats: TrajectoryStats, w_allow_mps: float,
+                           gcs_sysid: int, recovery_climb_mps: float) -> list[Check]:  # fmt: skip
+    """ArduCopter's side of the preflight, in the spirit of PX4's (``param_checks``): its failsafes as they
+    apply to flighttest's link, and the GUIDED limits the plan must fit within (each failure names the
+    value to set). ArduCopter has no offboard-loss mode change: with setpoints gone for GUID_TIMEOUT it
+    zeroes its targets and brakes in GUIDED."""
+    out = []
+    t = params.get("GUID_TIMEOUT")
+    out.append(Check("GUID_TIMEOUT", WARN, "not reported", "≤ 3 s") if t is None else Check(
+        "GUID_TIMEOUT", PASS if 0 < float(t) <= 3.0 else WARN, f"{float(t):g} s",
+        "≤ 3 s: setpoints gone this long, GUIDED brakes and holds (no mode change)"))  # fmt: skip
+    fs = params.get("FS_GCS_ENABLE")
+    if fs is None:
+        out.append(Check("FS_GCS_ENABLE", WARN, "not reported", "a GCS failsafe action"))
+    else:
+        action = GCS_FS_ACTIONS.get(int(fs), f"unknown ({fs})")
+        out.append(Check("FS_GCS_ENABLE", PASS if int(fs) in (1, 3, 4, 5, 7) else WARN, f"{int(fs)} = {action}",
+                         "on (RTL/SmartRTL/Land/Brake-Land): a lost link is not left holding in GUIDED"))  # fmt: skip
+    ft = params.get("FS_GCS_TIMEOUT")
+    if ft is not None:
+        out.append(Check("FS_GCS_TIMEOUT", PASS if 0 < float(ft) <= 5.0 else WARN, f"{float(ft):g} s", "≤ 5 s"))
+    sysid = params.get("MAV_GCS_SYSID")
+    if sysid is None:
+        out.append(Check("MAV_GCS_SYSID", WARN, "not reported", f"{gcs_sysid}, flighttest's system id"))
+    else:
+        match = int(sysid) == gcs_sysid
+        fs_on = fs is not None and int(fs) != 0
+        need = f"{gcs_sysid}, flighttest's system id: its GCS failsafe watches only that ground station"
+        if not match:
+            need += f"; set MAV_GCS_SYSID to {gcs_sysid} to have it watch flighttest"
+        out.append(Check("MAV_GCS_SYSID", PASS if match else FAIL if fs_on else WARN, f"{int(sysid)}", need))
+    out.append(_need("WP_SPD_DN", params.get("WP_SPD_DN"), stats.descent_max_mps, "m/s",
+                     "GUIDED clips descents to it"))  # fmt: skip
+    out.append(_need("WP_SPD_UP", params.get("WP_SPD_UP"), max(stats.climb_max_mps, recovery_climb_mps), "m/s",
+                     "GUIDED clips climbs to it; the recovery climbs"))  # fmt: skip
+    out.append(_need("WP_ACC_Z", params.get("WP_ACC_Z"), stats.accel_z_max_mps2, "m/s²",
+                     f"the plan's vertical acceleration; {GUIDED_SHAPING}"))  # fmt: skip
+    out.append(_need("WP_ACC", params.get("WP_ACC"), stats.accel_h_max_mps2, "m/s²",
+                     f"the plan's horizontal acceleration; {GUIDED_SHAPING}"))  # fmt: skip
+    jerk_d = params.get("PSC_JERK_D")
+    if jerk_d is not None and float(jerk_d) > 0:
+        # the position controller ramps each acceleration step at this jerk: a plan whose steps it smooths
+        # over more than a few telemetry periods arrives late (a step plan, the vertical's, has no finite jerk)
+        ramp_s = stats.accel_z_max_mps2 / float(jerk_d)
+        out.append(Check("PSC_JERK_D", PASS if ramp_s <= JERK_RAMP_MAX_S else WARN, f"{float(jerk_d):g} m/s³",
+                         f"ramps the plan's {stats.accel_z_max_mps2:.2f} m/s² in ≤ {JERK_RAMP_MAX_S:g} s "
+                         f"(takes {ramp_s:.2f} s)"))  # fmt: skip
+    jerk = params.get("WP_JERK")
+    if jerk is not None:
+        out.append(Check("WP_JERK", PASS, f"{float(jerk):g} m/s³", "waypoint jerk (AUTO; reported)"))
+    land = params.get("LAND_SPD_MS")
+    if land is not None:
+        out.append(Check("LAND_SPD_MS", PASS if float(land) <= w_allow_mps else WARN, f"{float(land):g} m/s",
+                         f"≤ w_allow {w_allow_mps:.2f} m/s: Land's final descent below the VRS onset"))  # fmt: skip
+    fence = params.get("FENCE_ENABLE")
+    if fence is not None:
+        out.append(Check("FENCE_ENABLE", WARN if int(fence) else PASS, f"{int(fence)}",
+                         "a fence breach takes the vehicle out of GUIDED mid-descent: check its limits"))  # fmt: skip
+    delay = params.get("DISARM_DELAY")
+    if delay is not None:
+        out.append(Check("DISARM_DELAY", PASS, f"{int(delay)} s", "disarms this long after landing (reported)"))
     return out

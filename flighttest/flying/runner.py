@@ -29,15 +29,18 @@ from typing import Any
 from flighttest.analysis import descent_time as dtime
 from flighttest.errors import FlighttestError
 from flighttest.flying import guard as gd
+from flighttest.flying.autopilot import ARDUPILOT, PX4_RULES, AutopilotRules
 from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopilot, z_position_gain_per_s
 from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, LadderExecutor
-from flighttest.flying.link import Link, VehicleLink
+from flighttest.flying.link import GCS_SYSID, Link, VehicleLink
 from flighttest.flying.log_writer import FlightLogWriter
 from flighttest.flying.outcome import FlightOutcome, FlyRequest, Outcome, Phase, final_mode
 from flighttest.flying.pauses import FlightPauses
 from flighttest.flying.preflight import (
     ABORT_PARAMS,
+    ARDUPILOT_PARAMS,
     PreflightResult,
+    ardupilot_param_checks,
     param_checks,
     trajectory_checks,
     trajectory_stats,
@@ -52,7 +55,7 @@ from flighttest.model.trajectory import Trajectory
 # re-exported: what callers of the runner have always imported from here
 __all__ = ["LADDER_TIMEOUT_S", "LINK_GIVE_UP_S", "FlightOutcome", "FlyRequest", "MissionRunner", "final_mode", "fly"]
 CLIMB_RATE_MPS = 1.0
-HEALTH_WAIT_S = 30.0  # how long the preflight waits for every health flag before it judges them
+HEALTH_PROGRESS_S = 10.0  # while waiting for the vehicle's health, a progress line this often
 # settled: within this of the hover point, this slow (PX4's estimate wanders 0.3-0.8 m and its velocity
 # is off by 0.1-0.2 m/s: ../shared/px4_sih; tighter and a real vehicle never settles)
 SETTLE_TOL_M = 0.6
@@ -86,6 +89,7 @@ class MissionRunner:
         self.fl = req.config.flight
         self.mission_name = req.mission_name
         self.phase: str = Phase.INIT
+        self.rules: AutopilotRules = PX4_RULES  # the vehicle's autopilot's, once it answered
         self.link: Link | None = None
         self.streamer: SetpointStreamer | None = None
         self.log: FlightLogWriter | None = None
@@ -284,6 +288,10 @@ class MissionRunner:
             await link.close()
             raise
         self.connected = connect_task.done() and not connect_task.cancelled()
+        if self.connected:
+            self.rules = link.rules
+            self.ladder.rules = link.rules
+            self.event("autopilot", **link.rules.describe())
         if self.ladder.active:  # Ctrl-C while connecting
             await link.close()
             return self._outcome(Outcome.ABORTED, self.ladder.reason)
@@ -363,26 +371,43 @@ class MissionRunner:
             outcome = Outcome.PROBE_STOPPED
         return self._outcome(outcome, self.ladder.reason)
 
+    async def _wait_for_health(self, timeout_s: float) -> None:
+        """A vehicle that has just booted (ArduCopter SITL: 42 s until its EKF uses GPS) or landed (the
+        campaign's next flight; PX4 SITL: more than 10 s) is not armable for a while: wait for it, saying
+        what is missing every ``HEALTH_PROGRESS_S``, before the preflight judges it."""
+        link = self.link
+        t0 = self.now()
+
+        def not_ok() -> list[str]:
+            return sorted(k.removeprefix("is_") for k, v in link.state.health.items() if not v)
+
+        self.event("waiting_for_health", not_ok=not_ok(), timeout_s=timeout_s)
+        while self.now() - t0 < timeout_s:
+            if await link.wait_for(_healthy, min(HEALTH_PROGRESS_S, timeout_s - (self.now() - t0))):
+                self.event("healthy", after_s=round(self.now() - t0, 1))
+                return
+            missing = ", ".join(not_ok()) or "health not reported"
+            self.req.print_fn(f"waiting for the vehicle to be ready ({missing}): {self.now() - t0:.0f} s "
+                              f"of at most {timeout_s:.0f} s")  # fmt: skip
+
     async def _preflight(self) -> PreflightResult:
         self.set_phase(Phase.PREFLIGHT)
         link, req = self.link, self.req
         await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
-        if not link.state.armed and link.state.flight_mode == "OFFBOARD":
+        rules = self.rules
+        if rules.reset_disarmed_offboard and not link.state.armed and link.state.flight_mode == rules.offboard_mode:
             # PX4 stays in Offboard after an offboard flight lands, and Offboard without a setpoint
             # stream is not armable (the campaign's next flight on the same vehicle): Hold is armable
-            self.event("mode_reset", old="OFFBOARD", new="HOLD", why="disarmed in Offboard is not armable")
+            self.event("mode_reset", old=rules.offboard_mode, new=rules.hold_mode,
+                       why="disarmed in Offboard is not armable")  # fmt: skip
             with contextlib.suppress(Exception):
                 await link.hold(5.0)
         if not _healthy(link.state):
-            # a vehicle that has just landed (the campaign's next flight) or booted is not armable
-            # for some seconds (PX4 SITL: more than 10 s after a landing); wait before judging it
-            self.event("waiting_for_health", not_ok=sorted(k for k, v in link.state.health.items() if not v),
-                       timeout_s=HEALTH_WAIT_S)  # fmt: skip
-            if await link.wait_for(_healthy, HEALTH_WAIT_S):
-                self.event("healthy")
+            await self._wait_for_health(rules.health_wait_s)
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
         params = {}
-        for name, kind in ABORT_PARAMS.items():
+        wanted = ARDUPILOT_PARAMS if rules.name == ARDUPILOT else ABORT_PARAMS
+        for name, kind in wanted.items():
             params[name] = await link.get_param(name, kind)
         # the parameter snapshot of this flight (params.json): everything relevant, read once and
         # bounded (a slow link must not hold the flight up); else the values just read, noted
@@ -406,7 +431,10 @@ class MissionRunner:
         stats = trajectory_stats(self.traj, self.limits.region, accel)
         ab = self.cfg.abort
         checks = vehicle_checks(link.state, self.now(), self.fl.telemetry_hz, self.fl.min_battery_percent)
-        checks += param_checks(params, stats.descent_max_mps, req.profile.w_allow_mps)
+        if rules.name == ARDUPILOT:
+            checks += ardupilot_param_checks(params, stats, req.profile.w_allow_mps, GCS_SYSID, ab.recovery_climb_mps)
+        else:
+            checks += param_checks(params, stats.descent_max_mps, req.profile.w_allow_mps)
         checks += trajectory_checks(stats, req.profile, self.fl.start_height_m, self.fl.min_alt_m,
                                     self.fl.geofence_radius_m, ab.recovery_lateral_mps * ab.recovery_s,
                                     self.cfg.guard.observe_region)  # fmt: skip
@@ -507,9 +535,10 @@ class MissionRunner:
             self.set_phase(Phase.LANDED)
         else:
             self.set_phase(Phase.HOLD)
-            await link.stop_offboard(10.0)
-            if not await link.wait_for(lambda s: s.flight_mode == "HOLD", 5.0):
-                raise RuntimeError("Hold not confirmed after the flight (--no-land)")
+            rules = self.rules
+            await (link.stop_offboard(10.0) if rules.hold_by_offboard_stop else link.hold(10.0))
+            if not await link.wait_for(lambda s: s.flight_mode == rules.hold_mode, 5.0):
+                raise RuntimeError(f"{rules.hold_mode.title()} not confirmed after the flight (--no-land)")
         return self._outcome(Outcome.COMPLETED, None)
 
     async def _settle(self, sp: Setpoint, min_s: float, max_s: float, baseline: bool = False,

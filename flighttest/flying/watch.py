@@ -13,12 +13,12 @@ from typing import Any, Protocol
 
 from flighttest.analysis import descent_time as dtime
 from flighttest.flying import guard as gd
+from flighttest.flying.autopilot import AutopilotRules
 from flighttest.flying.link import Link
 from flighttest.flying.log_writer import FlightLogWriter
 from flighttest.flying.outcome import Phase
 from flighttest.flying.streamer import SetpointStreamer
 
-PILOT_MODES = gd.PILOT_MODES
 # a mode counts as reported while armed once the vehicle stayed armed this long after it arrived: PX4
 # changes the mode it reports in the same heartbeat that says it disarmed (LAND → OFFBOARD or HOLD, the
 # mode before), and MAVSDK hands the two over separately
@@ -29,6 +29,7 @@ class WatchHost(Protocol):
     """What the watch needs of the flight it watches (``flighttest.flying.runner.MissionRunner``)."""
 
     phase: str
+    rules: AutopilotRules  # the vehicle's autopilot: its offboard mode and its pilots' modes
     floor_active: bool  # the altitude floor applies (from the start point to the end of the descent)
     expect_offboard: bool  # flighttest flies offboard now: any other mode is a takeover or a failure
     ladder: gd.AbortLadder
@@ -108,16 +109,17 @@ class FlightWatch:
         """A pilot mode is a takeover: the ladder finishes at once and nothing more is sent. Leaving
         offboard any other way while flighttest flies it is a failure: the ladder from Hold."""
         host = self.host
+        rules = host.rules
         self._t_mode_change = host.now()
         host.event("mode", old=old, new=new)
-        if host.phase == Phase.LAND and new in PILOT_MODES and not host.ladder.active:
+        if host.phase == Phase.LAND and new in rules.pilot_modes and not host.ladder.active:
             # the pilot takes the landing over: send nothing more (the ladder, once started, sees it itself)
             host.abort(f"pilot took over ({new}) while landing", gd.Rung.LAND)
             host.ladder.finish(host.now(), f"pilot in control ({new})")
             return
-        if not host.expect_offboard or new == "OFFBOARD" or host.ladder.active:
+        if not host.expect_offboard or new == rules.offboard_mode or host.ladder.active:
             return
-        if new in PILOT_MODES:
+        if new in rules.pilot_modes:
             host.abort(f"pilot took over ({new})", gd.Rung.HOLD)
             host.ladder.finish(host.now(), f"pilot in control ({new})")
         else:
