@@ -4,8 +4,9 @@ Plans the helix for the vehicle (or loads a planned file given as ``plan.traject
 ``helix_descent.toml``) and flies it. The plan keeps a *tracking margin* (``[plan]`` in the TOML,
 ``flighttest.planner.tracking``): inside the guard's bound by ``guard_margin_mps``, tilt, body
 rates and thrust below the vehicle's limits, descent below PX4's ``MPC_Z_VEL_MAX_DN``, so the
-autopilot's feedback has room and the guard stays silent on a well-flown helix. Planning takes a
-few seconds of IPOPT.
+autopilot's feedback has room and the guard stays silent on a well-flown helix. A profile with an
+``[autopilot]`` table (``arducopter_sitl``: ArduCopter's GUIDED limits) also keeps the helix's
+acceleration, descent and climb within those limits. Planning takes a few seconds of IPOPT.
 
     flighttest fly helix --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
 """

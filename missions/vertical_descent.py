@@ -1,7 +1,8 @@
 """Vertical descent: the baseline, straight down at the vehicle's safe vertical speed.
 
 Cruise at ``w_allow − margin − extra_margin`` (inside the guard's own bound, so it stays silent), accelerating and
-braking within the vehicle's limits. Edit ``vertical_descent.toml`` or copy this file.
+braking within the vehicle's limits and, for a profile with an ``[autopilot]`` table, within the autopilot's
+(``flighttest.planner.vertical``). Edit ``vertical_descent.toml`` or copy this file.
 
     python missions/vertical_descent.py --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
     flighttest fly vertical --connect udpout://127.0.0.1:14580 --vehicle x500 --yes

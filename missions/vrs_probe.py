@@ -21,7 +21,7 @@ from flighttest.flying.plan_config import ProbePlanConfig
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import Trajectory
 from flighttest.planner.export import probe_trajectory
-from flighttest.planner.probe import plan_probe
+from flighttest.planner.problems import probe_plan
 
 CONFIG = Path(__file__).with_suffix(".toml")
 
@@ -40,7 +40,9 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
             f"probe: the guard's descent cap {cap:g} m/s must exceed the sweep's top speed {top:.2f} m/s "
             "(raise [guard] max_descent_mps or lower the top speed)"
         )
-    pp = plan_probe(
+    # within the vehicle's accelerations and, where the profile names them, its autopilot's limits
+    pp = probe_plan(
+        profile,
         amplitude_m=p.amplitude_m,
         omega0_rps2=p.omega0_rps2,
         ramp_s=p.ramp_s,
@@ -48,8 +50,7 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
         duration_s=p.duration_s,
         start_alt_m=fl.start_height_m,
         floor_alt_m=fl.min_alt_m,
-        max_accel_down_mps2=p.accel_fraction * profile.max_accel_down_mps2,
-        max_accel_up_mps2=p.accel_fraction * profile.max_accel_up_mps2,
+        accel_fraction=p.accel_fraction,
     )
     return probe_trajectory(pp, profile.name, profile.mass_kg)
 

@@ -190,6 +190,20 @@ class _Summary:
     rows: list[tuple[str, str]]  # table rows before the trajectory and plot rows
 
 
+def _autopilot_rows(profile: VehicleProfile) -> list[tuple[str, str]]:
+    """The row naming the autopilot limits the plan keeps within (none for a profile without them)."""
+    from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION
+
+    ap = profile.autopilot
+    if ap is None:
+        return []
+    named = [(label, v, unit) for label, v, unit in (
+        ("vertical accel", ap.accel_z_max_mps2, "m/s²"), ("horizontal accel", ap.accel_h_max_mps2, "m/s²"),
+        ("descent", ap.descent_max_mps, "m/s"), ("climb", ap.climb_max_mps, "m/s")) if v is not None]  # fmt: skip
+    limits = ", ".join(f"{label} {v:g} {unit}" for label, v, unit in named) or "none given"
+    return [("autopilot limits", f"≤ {AUTOPILOT_LIMIT_FRACTION:.0%} of {ap.name}'s {limits}")]
+
+
 def _write_and_report(args: argparse.Namespace, traj, out_stem: Path, summary: _Summary, constraint,
                       wind: tuple[float, float, float] = (0.0, 0.0, 0.0),
                       validate_for: VehicleProfile | None = None) -> None:  # fmt: skip
@@ -353,6 +367,7 @@ def cmd_helix(args: argparse.Namespace) -> int:
         ("max tilt", f"{c['max_tilt_deg']:.1f}°"),
         ("constraint", f"{p.constraint.name}, margin {p.constraint.margin_mps:g} m/s"),
         ("worst margin (1 kHz re-sim)", f"{c['worst_margin_mps']:+.4f} m/s"),
+        *_autopilot_rows(profile),
     ]
     summary = _Summary(f"3D descent ({profile.name})", sol.status, sol.t_f_s, sol.solve_s, fields, rows)
     _write_and_report(args, traj, out_stem, summary, p.constraint, wind, validate_for=profile)
@@ -380,6 +395,7 @@ def cmd_vertical(args: argparse.Namespace) -> int:
         ("duration", f"{plan.t_f_s:.2f} s for {args.height:g} m"),
         ("cruise", f"{plan.cruise_mps:.3f} m/s (w_allow {w_allow:.3f} m/s)"),
         ("accel down / up", f"{plan.a_down_mps2:.2f} / {plan.a_up_mps2:.2f} m/s²"),
+        *_autopilot_rows(profile),
     ]
     summary = _Summary(f"vertical baseline ({profile.name})", "closed_form", plan.t_f_s, 0.0, fields, rows)
     _write_and_report(args, traj, out_stem, summary, vertical_constraint(profile, plan), validate_for=profile)
@@ -417,8 +433,10 @@ def cmd_probe(args: argparse.Namespace) -> int:
     }
     rows = [
         ("duration", f"{plan.t_f_s:.2f} s, {plan.cycles} cycles"),
-        ("max descent speed", f"{plan.max_descent_mps:.2f} m/s (cap {top:g})"),
+        # the cap the plan was made with: the autopilot's descent limit may have lowered it
+        ("max descent speed", f"{plan.max_descent_mps:.2f} m/s (cap {plan.problem['max_descent_mps']:g})"),
         ("profile w_allow", f"{profile.w_allow_mps:.3f} m/s"),
+        *_autopilot_rows(profile),
     ]
     summary = _Summary(f"probe reference ({profile.name})", "closed_form", plan.t_f_s, 0.0, fields, rows)
     # the plot's region is the guard's as `fly probe` flies it (the profile's w_allow and margin)

@@ -63,6 +63,15 @@ def cmd_show(args: argparse.Namespace) -> int:
     t.add_column("field")
     t.add_column("value")
     for key, value in s.items():
-        t.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
+        t.add_row(key, _shown(value))
     console.print(t)
     return 0
+
+
+def _shown(value: object) -> str:
+    """A summary value in the table: floats to 4 digits, a table (``autopilot``) as its given keys."""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {_shown(v)}" for k, v in value.items() if v is not None)
+    return str(value)

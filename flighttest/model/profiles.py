@@ -4,6 +4,10 @@ Shipped profiles live in ``flighttest/model/profiles/``. User profiles are searc
 of ``$FLIGHTTEST_VEHICLES`` (``os.pathsep``-separated) and then ``~/.config/flighttest/vehicles``;
 a path to a ``.toml`` file works wherever a name does. ``flighttest identify --write-profile``
 writes measured boundaries into the user folder, never into the package.
+
+An optional ``[autopilot]`` table (``AutopilotLimits``) names the autopilot and the limits its position
+control shapes setpoints with (ArduCopter's GUIDED: WP_ACC_Z, WP_ACC, WP_SPD_DN, WP_SPD_UP); the planners
+keep every plan for the profile within them (``flighttest.planner.autopilot_limits``). No table: no limits.
 """
 
 from __future__ import annotations
@@ -56,6 +60,28 @@ class VrsBoundary:
     source: str = "paper defaults (Talaeizadeh et al.): 20° cone, Onera k=6, eps_cr=0.4"
 
 
+# The autopilots whose names a profile's [autopilot] table may give: flighttest.flying.autopilot's names
+# (the model layer does not import the flying layer; tests/test_autopilot_limits.py holds the two equal)
+AUTOPILOT_NAMES = ("PX4", "ArduPilot")
+
+
+@dataclass(frozen=True)
+class AutopilotLimits:
+    """The limits the autopilot's position control shapes the setpoints it is sent with (ArduCopter's
+    GUIDED: WP_ACC_Z, WP_ACC, WP_SPD_DN, WP_SPD_UP). A plan that asks for more is flown late and
+    overshoots, so the planners keep inside them (``flighttest.planner.autopilot_limits``). None: that
+    limit does not apply. All positive: accelerations in m/s² (vertical, horizontal), speeds in m/s."""
+
+    name: str
+    accel_z_max_mps2: float | None = None
+    accel_h_max_mps2: float | None = None
+    descent_max_mps: float | None = None
+    climb_max_mps: float | None = None
+
+    def summary(self) -> dict[str, Any]:
+        return asdict(self)
+
+
 @dataclass(frozen=True)
 class VehicleProfile:
     name: str
@@ -77,6 +103,8 @@ class VehicleProfile:
     # autopilot's feed-forward knows nothing of it, so flighttest adds what it costs (feedforward.py)
     drag_n_per_mps: float = 0.0
     vrs: VrsBoundary = field(default_factory=VrsBoundary)
+    # the autopilot's setpoint-shaping limits the plans must fit within (None: no table, none apply)
+    autopilot: AutopilotLimits | None = None
     path: str = ""
 
     # -- derived quantities -------------------------------------------------------------------------
@@ -156,6 +184,7 @@ class VehicleProfile:
             "w_allow_source": self.w_allow_source,
             "cone_deg": self.vrs.cone_deg,
             "margin_mps": self.vrs.margin_mps,
+            "autopilot": self.autopilot.summary() if self.autopilot is not None else None,
         }
 
 
@@ -196,6 +225,14 @@ _VRS_FIELDS: dict[str, Any] = {
     "eps_vrs": Range(0.0, 5.0, lo_open=True),
     "eps_tws": Range(0.0, 5.0, lo_open=True),
     "source": _TEXT,
+}
+_AUTOPILOT_FIELDS: dict[str, Any] = {
+    "name": _TEXT,
+    # any positive limit up to 10 g for the accelerations (past any multicopter's), as fast as any speed
+    "accel_z_max_mps2": Range(0.0, 100.0, "m/s²", lo_open=True),
+    "accel_h_max_mps2": Range(0.0, 100.0, "m/s²", lo_open=True),
+    "descent_max_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
+    "climb_max_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
 }
 MAX_V_H_MPS = 50.0  # hover induced velocity: ~4 m/s on a Mambo, ~15 m/s on heavy lifters
 MAX_THRUST_TO_WEIGHT = 30.0  # racing quadcopters reach ~15
@@ -260,7 +297,7 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
     """Validate a parsed TOML document into a profile; any problem is one FlighttestError line."""
     if not isinstance(data, dict):
         raise FlighttestError(f"{path}: a vehicle profile must be a TOML table")
-    known = set(_TOP_REQUIRED) | set(_TOP_OPTIONAL) | {"vrs"}
+    known = set(_TOP_REQUIRED) | set(_TOP_OPTIONAL) | {"vrs", "autopilot"}
     for key in data:
         if key not in known:
             raise _bad(path, shown(key, 40).strip("'"), "is not a known profile field")
@@ -283,7 +320,8 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
     vrs = VrsBoundary(**vrs_kwargs)
     if vrs.eps_tws > vrs.eps_vrs:
         raise _bad(path, "vrs.eps_tws", "must not exceed vrs.eps_vrs (the TWS lies inside the VRS)")
-    prof = VehicleProfile(**kwargs, vrs=vrs, path=str(path))
+    autopilot = _autopilot_from(data["autopilot"], path) if "autopilot" in data else None
+    prof = VehicleProfile(**kwargs, vrs=vrs, autopilot=autopilot, path=str(path))
     if prof.thrust_to_weight <= 1.0:
         twr = prof.thrust_to_weight
         raise _bad(path, "max_thrust_per_rotor_n", f"cannot lift the vehicle (thrust/weight {twr:.2f})")
@@ -291,6 +329,22 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
         raise _bad(path, "min_thrust_per_rotor_n", "must be below the hover thrust per rotor")
     _check_derived(prof, path)
     return prof
+
+
+def _autopilot_from(raw: Any, path: Path | str) -> AutopilotLimits:
+    """The ``[autopilot]`` table: which autopilot, and the limits its position control shapes setpoints with."""
+    if not isinstance(raw, dict):
+        raise _bad(path, "autopilot", "must be a table")
+    values: dict[str, Any] = {}
+    for key, value in raw.items():
+        if key not in _AUTOPILOT_FIELDS:
+            raise _bad(path, f"autopilot.{shown(key, 40).strip(chr(39))}", "is not a known field")
+        values[key] = _check_value(path, f"autopilot.{key}", value, _AUTOPILOT_FIELDS[key])
+    if "name" not in values:
+        raise _bad(path, "autopilot.name", f"is missing (one of {', '.join(AUTOPILOT_NAMES)})")
+    if values["name"] not in AUTOPILOT_NAMES:
+        raise _bad(path, "autopilot.name", f"must be one of {', '.join(AUTOPILOT_NAMES)} (got {shown(values['name'])})")
+    return AutopilotLimits(**values)
 
 
 def load_profile_file(path: Path | str) -> VehicleProfile:
@@ -357,6 +411,9 @@ def profile_to_dict(profile: VehicleProfile) -> dict[str, Any]:
     d["max_rate_dps"] = list(profile.max_rate_dps)
     vrs = {k: v for k, v in d.pop("vrs").items() if v is not None}
     d["vrs"] = vrs
+    autopilot = d.pop("autopilot")
+    if autopilot is not None:  # TOML has no null: a limit that does not apply is left out
+        d["autopilot"] = {k: v for k, v in autopilot.items() if v is not None}
     return d
 
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from flighttest.model.aero import G_MPS2
-from flighttest.model.frames import quat_to_euler, quat_to_rotmat
+from flighttest.model.frames import quat_to_euler
 from flighttest.model.trajectory import Trajectory
 from flighttest.planner import helix as helix_mod
 from flighttest.planner import planar as planar_mod
@@ -97,7 +97,7 @@ def helix_trajectory(
     x = np.stack([np.interp(t, d.t, d.x[:, j]) for j in range(d.x.shape[1])], 1)
     u = np.stack([np.interp(t, d.t, d.u[:, j]) for j in range(d.u.shape[1])], 1)
     q = x[:, 6:10] / np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
-    acc = quat_to_rotmat(q)[:, :, 2] * (-u[:, 0:1]) + np.array([0.0, 0.0, G_MPS2])
+    acc = helix_mod.commanded_accel_np(x, u)
     roll, pitch, yaw = quat_to_euler(q)
     meta = _solver_meta(sol, "helix", vehicle, extra or {})
     return Trajectory.from_arrays(

@@ -16,7 +16,11 @@ the attitude controller), with collective thrust ≤ ``thrust_fraction`` of the 
 Constraints: the air-relative body-frame velocity ``v_b = R(q)ᵀ(v − wind)`` must satisfy
 ``VelocityConstraint`` (cone or guard region, ``cone.py``); horizontal radius from the start
 ``N² + E² ≤ R²``; tilt ``R₃₃ = 1 − 2(q_x² + q_y²) ≥ cos(tilt_max)``; thrust ≥ the rotors' minimum
-(never reversed). Hover to hover: start at the origin level with yaw 0, end at ``(N_f, E_f, h)``
+(never reversed). Where the autopilot shapes the setpoints it is sent (a profile's ``[autopilot]``
+table, ``autopilot_limits``), the commanded acceleration ``a = v̇`` (what the trajectory exports as
+``an/ae/ad``) is bounded too, ``a_D² ≤ accel_z_max²`` and ``a_N² + a_E² ≤ accel_h_max²`` as path
+constraints (tightened between nodes like the others, below), and ``v_D`` lies between ``−climb_max``
+and ``descent_max``. Hover to hover: start at the origin level with yaw 0, end at ``(N_f, E_f, h)``
 (the start's XY by default) level, at rest, any yaw.
 
 Initial guesses: helices with 1 and 2 turns on the circle through the start that fits in the
@@ -45,6 +49,7 @@ from flighttest.errors import FlighttestError
 from flighttest.model.aero import G_MPS2
 from flighttest.model.frames import quat_from_euler, quat_multiply, quat_to_rotmat
 from flighttest.model.profiles import VehicleProfile
+from flighttest.planner.autopilot_limits import capped, plan_limits
 from flighttest.planner.cone import VelocityConstraint
 from flighttest.planner.multistart import attempt_record, multistart_refined, refine
 from flighttest.planner.ocp import (
@@ -82,6 +87,12 @@ class HelixProblem:
     vehicle: str = ""
     # descent-speed bound (m/s, NED v_D): PX4 clips offboard velocity setpoints to MPC_Z_VEL_MAX_DN
     descent_max_mps: float | None = None
+    # the autopilot's setpoint shaping (None: unbounded): climb speed (m/s, −v_D), and the commanded
+    # acceleration's vertical |a_D| and horizontal |(a_N, a_E)| (m/s²), which ArduCopter's GUIDED ramps
+    # at WP_ACC_Z / WP_ACC whatever the plan asks
+    climb_max_mps: float | None = None
+    accel_z_max_mps2: float | None = None
+    accel_h_max_mps2: float | None = None
     # collective-thrust rate bound (m/s³): a plan's thrust steps become vertical jerks the autopilot's
     # velocity loop overshoots (None: unbounded, the paper's optimum)
     thrust_rate_max_mps3: float | None = None
@@ -101,9 +112,11 @@ class HelixProblem:
             raise FlighttestError("helix problem: wind must be finite")
         if self.n_intervals < 10 or self.n_coarse < 10:
             raise FlighttestError("helix problem: need at least 10 mesh intervals")
-        if self.descent_max_mps is not None and not (math.isfinite(self.descent_max_mps) and self.descent_max_mps > 0):
-            got = self.descent_max_mps
-            raise FlighttestError(f"helix problem: descent bound must be a positive number (got {got!r})")
+        for name, v in (("descent", self.descent_max_mps), ("climb", self.climb_max_mps),
+                        ("vertical acceleration", self.accel_z_max_mps2),
+                        ("horizontal acceleration", self.accel_h_max_mps2)):  # fmt: skip
+            if v is not None and not (math.isfinite(v) and v > 0):
+                raise FlighttestError(f"helix problem: {name} bound must be a positive number (got {v!r})")
 
     def summary(self) -> dict:
         return {
@@ -118,6 +131,9 @@ class HelixProblem:
             "tilt_max_deg": math.degrees(self.tilt_max_rad),
             "speed_max_mps": self.speed_max_mps,
             "descent_max_mps": self.descent_max_mps,
+            "climb_max_mps": self.climb_max_mps,
+            "accel_z_max_mps2": self.accel_z_max_mps2,
+            "accel_h_max_mps2": self.accel_h_max_mps2,
             "thrust_rate_max_mps3": self.thrust_rate_max_mps3,
             "wind_ned_mps": list(self.wind_ned_mps),
             "n_intervals": self.n_intervals,
@@ -142,7 +158,9 @@ def problem_for_vehicle(
     tilt_margin_deg: float = 0.0,
     rate_margin_dps: float = 0.0,
 ) -> HelixProblem:
-    """Bounds from a vehicle profile; thrust ≥ the rotors' minimum (never reversed).
+    """Bounds from a vehicle profile; thrust ≥ the rotors' minimum (never reversed). Where the
+    profile names its autopilot's setpoint-shaping limits (``[autopilot]``), the descent and climb
+    speeds and the commanded acceleration stay within ``autopilot_limits.plan_limits`` of them.
 
     Planning/tracking margins (keyword only, all ≥ 0, default 0): ``extra_margin_mps`` is added to
     the constraint's margin (the plan keeps that much further inside the guard/cone bound than the
@@ -180,6 +198,7 @@ def problem_for_vehicle(
         constraint = VelocityConstraint(cone_deg=profile.vrs.cone_deg, margin_mps=profile.vrs.margin_mps)
     if extra_margin_mps:
         constraint = replace(constraint, margin_mps=constraint.margin_mps + extra_margin_mps)
+    limits = plan_limits(profile)
     return HelixProblem(
         height_m=height_m,
         radius_m=radius_m,
@@ -195,6 +214,10 @@ def problem_for_vehicle(
         n_intervals=n_intervals,
         n_coarse=n_coarse,
         vehicle=profile.name,
+        descent_max_mps=limits.descent_max_mps,
+        climb_max_mps=limits.climb_max_mps,
+        accel_z_max_mps2=limits.accel_z_max_mps2,
+        accel_h_max_mps2=limits.accel_h_max_mps2,
     )
 
 
@@ -258,24 +281,34 @@ def _spec(p: HelixProblem, n: int) -> OcpSpec:
     x_lb = np.array([-p.radius_m, -p.radius_m, -big, -vmax, -vmax, -vmax, -1.1, -1.1, -1.1, -1.1])
     x_ub = -x_lb
     x_ub[2] = big
-    if p.descent_max_mps is not None:
-        x_ub[5] = min(vmax, p.descent_max_mps)
+    x_ub[5] = capped(vmax, p.descent_max_mps)
+    x_lb[5] = -capped(vmax, p.climb_max_mps)
     xf = np.array([p.end_ne_m[0], p.end_ne_m[1], p.height_m, 0, 0, 0, 0, 0, 0, 0])
     xf_lb, xf_ub = xf.copy(), xf.copy()
     xf_lb[[6, 9]], xf_ub[[6, 9]] = -1.1, 1.1  # yaw free at the end
     hover = np.array([G_MPS2, 0.0, 0.0, 0.0])
     cos_tilt = math.cos(p.tilt_max_rad)
     con = p.constraint
+    path_lb, path_ub = _path_bounds(p)
 
     def path(x, u):
         w, u_sq = _blade(p, x)
         q = x[6:10]
-        return ca.vertcat(
+        rows = [
             con.slack_casadi(w, u_sq=u_sq),
             p.radius_m**2 - x[0] ** 2 - x[1] ** 2,
             1 - 2 * (q[1] ** 2 + q[2] ** 2) - cos_tilt,
             ca.sumsqr(x[3:6]) - 0.0,
-        )
+        ]
+        # the commanded acceleration, the dynamics' v̇, as slacks ``bound² − a²`` ≥ 0 (a lower bound the
+        # tightening rounds can raise, as the radius's); rows only where bounded, so a problem without
+        # the autopilot's limits is the same NLP as before they existed
+        acc = _rot(q)[:, 2] * (-u[0]) + ca.vertcat(0, 0, G_MPS2)
+        if p.accel_z_max_mps2 is not None:
+            rows.append(p.accel_z_max_mps2**2 - acc[2] ** 2)
+        if p.accel_h_max_mps2 is not None:
+            rows.append(p.accel_h_max_mps2**2 - acc[0] ** 2 - acc[1] ** 2)
+        return ca.vertcat(*rows)
 
     rates = np.asarray(p.rate_max_rps)
     return OcpSpec(
@@ -295,12 +328,31 @@ def _spec(p: HelixProblem, n: int) -> OcpSpec:
         uf_lb=hover,
         uf_ub=hover,
         path=path,
-        path_lb=np.array([0.0, 0.0, 0.0, 0.0]),
-        path_ub=np.array([inf, inf, inf, vmax**2]),
+        path_lb=path_lb,
+        path_ub=path_ub,
         u_rate_max=np.concatenate([[p.thrust_rate_max_mps3 or inf], np.asarray(p.accel_max_rps2)]),
         smooth_weight=np.array([1e-6, 1e-4, 1e-4, 1e-4]),
         t_max_s=120.0,
     )
+
+
+# The acceleration rows of the path constraints, in this order after the first four, where bounded:
+# HelixProblem's ``accel_z_max_mps2`` (|a_D|) and ``accel_h_max_mps2`` (|(a_N, a_E)|).
+_ACCEL_ROWS = ("accel_z", "accel_h")
+
+
+def _accel_bounds(p: HelixProblem) -> dict[str, float]:
+    """``{"accel_z": bound, "accel_h": bound}`` of the acceleration rows the problem has, in row order."""
+    bounds = {key: getattr(p, f"{key}_max_mps2") for key in _ACCEL_ROWS}
+    return {key: b for key, b in bounds.items() if b is not None}
+
+
+def _path_bounds(p: HelixProblem) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of ``_spec``'s path rows: cone slack, radius, tilt, speed², then (where the problem
+    bounds them) the vertical and the horizontal acceleration's slack, each ≥ 0."""
+    inf = np.inf
+    extra = len(_accel_bounds(p))
+    return np.array([0.0] * (4 + extra)), np.array([inf, inf, inf, p.speed_max_mps**2] + [inf] * extra)
 
 
 def _quat_from_thrust_and_yaw(spec_force: np.ndarray, yaw: np.ndarray) -> np.ndarray:
@@ -365,7 +417,10 @@ def steady_helix(p: HelixProblem) -> SteadyHelix:
     larger), capped by the speed and descent bounds.
     """
     r = STEADY_RADIUS_FRACTION * p.radius_m
-    bank = STEADY_BANK_FRACTION * min(p.tilt_max_rad, math.acos(min(1.0, G_MPS2 / p.f_max_mps2)))
+    bank_max = min(p.tilt_max_rad, math.acos(min(1.0, G_MPS2 / p.f_max_mps2)))
+    if p.accel_h_max_mps2 is not None:  # the steady turn's centripetal acceleration is g·tan(bank)
+        bank_max = min(bank_max, math.atan(p.accel_h_max_mps2 / G_MPS2))
+    bank = STEADY_BANK_FRACTION * bank_max
     v_h = min(math.sqrt(r * G_MPS2 * math.tan(bank)), 0.9 * p.speed_max_mps)
     bank = math.atan(v_h**2 / (r * G_MPS2))
     a, b = math.cos(bank), math.sin(bank)
@@ -402,6 +457,8 @@ def steady_helix_duration(p: HelixProblem, cruise: SteadyHelix | None = None) ->
     accel = G_MPS2 * math.tan(c.bank_rad)
     speed = math.hypot(c.speed_h_mps, c.descent_mps)
     t_ramp = max(1.0, 2.0 * speed / accel, 2.0 * math.sqrt(c.radius_m / accel))
+    if p.accel_z_max_mps2 is not None:  # the envelope's min-jerk ramp peaks at 1.875 × descent rate / t_ramp
+        t_ramp = max(t_ramp, 2.0 * c.descent_mps / p.accel_z_max_mps2)
     lo, hi = 1e-3, p.height_m / c.descent_mps + 2 * t_ramp
     tt = np.linspace(0.0, 1.0, 401)
     for _ in range(40):  # bisection: descent of the envelope's descent rate = height
@@ -482,6 +539,8 @@ TILT_TOL_DEG = 0.05
 RADIUS_TOL_M = 1e-3
 # Rates and thrust sit on their bounds up to IPOPT's bound relaxation (1e-8 relative).
 CONTROL_TOL_REL = 1e-6
+# The commanded acceleration (the autopilot's limits; between nodes it bulges at the end's flare), m/s²
+ACCEL_TOL_MPS2 = 0.01
 # What one mesh interval's integration may differ from the next node by (the NLP's one RK4 step
 # per interval against the 1 kHz integration from the same node): position, m.
 NODE_GAP_TOL_M = 0.01
@@ -496,6 +555,9 @@ TIGHTEN_GAIN = 1.5
 MAX_TILT_BACKOFF_DEG = 3.0
 MAX_RADIUS_BACKOFF_FRACTION = 0.05
 MAX_CONE_BACKOFF_MPS = 0.02
+# ... and never more than this fraction off an acceleration bound (that bound is already
+# AUTOPILOT_LIMIT_FRACTION of the autopilot's limit: an overshoot the tightening leaves stays below the limit)
+MAX_ACCEL_BACKOFF_FRACTION = 0.05
 # Long descents (the steady helix takes longer than LONG_DESCENT_S): no coarse multi-start (a coarse
 # mesh cannot resolve their turns, it only costs iterations), the fine mesh starts from the steady
 # helix, and its nodes are spaced by the manoeuvre: END_INTERVAL_S in the entry and exit (where the
@@ -551,13 +613,14 @@ def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
     (``long_descent_mesh``; at least ``n_intervals``).
 
     Path constraints hold at nodes and interval midpoints; between them the flown path can bulge
-    past a bound that the optimum rides (the tilt limit, the radius, the cone). Each round
-    re-simulates every interval from its node (``dense_path``), measures the overshoot of tilt,
-    radius and the cone interval by interval and re-solves (warm, same compiled NLP) with those
-    bounds tightened where they broke (by ``TIGHTEN_GAIN`` × the overshoot plus the tolerance, on
-    the interval and its neighbours; never by more than ``MAX_TILT_BACKOFF_DEG``,
-    ``MAX_RADIUS_BACKOFF_FRACTION`` × radius and ``MAX_CONE_BACKOFF_MPS``), until the
-    re-simulation is within ``TILT_TOL_DEG``, ``RADIUS_TOL_M`` and ``CONE_TOL_MPS``. Rates and
+    past a bound that the optimum rides (the tilt limit, the radius, the cone, the autopilot's
+    accelerations). Each round re-simulates every interval from its node (``dense_path``), measures
+    the overshoot of tilt, radius, the cone and the accelerations interval by interval and re-solves
+    (warm, same compiled NLP) with those bounds tightened where they broke (by ``TIGHTEN_GAIN`` × the
+    overshoot plus the tolerance, on the interval and its neighbours; never by more than
+    ``MAX_TILT_BACKOFF_DEG``, ``MAX_RADIUS_BACKOFF_FRACTION`` × radius, ``MAX_CONE_BACKOFF_MPS`` and
+    ``MAX_ACCEL_BACKOFF_FRACTION`` × the bound), until the re-simulation is within ``TILT_TOL_DEG``,
+    ``RADIUS_TOL_M``, ``CONE_TOL_MPS`` and ``ACCEL_TOL_MPS2``. Rates and
     thrust are controls, linear between nodes, so their box bounds hold exactly on the
     re-simulation; the check reports them too.
     """
@@ -601,8 +664,9 @@ def _interp_rows(t_new: np.ndarray, t: np.ndarray, arr: np.ndarray) -> np.ndarra
 
 
 class _Backoff:
-    """How far the cone, radius and tilt bounds are tightened at each constraint point of the mesh
-    (the N+1 nodes, then the N midpoints): raised only where the path broke them."""
+    """How far the cone, radius and tilt bounds (and the acceleration bounds a problem has) are
+    tightened at each constraint point of the mesh (the N+1 nodes, then the N midpoints): raised only
+    where the path broke them."""
 
     def __init__(self, p: HelixProblem, n: int):
         self.p = p
@@ -612,21 +676,27 @@ class _Backoff:
         self.tilt_rad = np.zeros(2 * n + 1)
         self.max = {"cone_mps": MAX_CONE_BACKOFF_MPS, "radius_m": MAX_RADIUS_BACKOFF_FRACTION * p.radius_m,
                     "tilt_rad": math.radians(MAX_TILT_BACKOFF_DEG)}  # fmt: skip
+        # m/s² off each acceleration bound the problem has (accel_z, accel_h)
+        self.accel_mps2 = {key: np.zeros(2 * n + 1) for key in _accel_bounds(p)}
+        self.max.update({key: MAX_ACCEL_BACKOFF_FRACTION * b for key, b in _accel_bounds(p).items()})
 
     def path_lb(self) -> np.ndarray:
-        """Lower bounds of the path constraints ``(2N+1, 4)`` (``_spec``'s rows: cone, radius, tilt, speed)."""
+        """Lower bounds of the path constraints ``(2N+1, rows)`` (``_spec``'s rows: cone, radius, tilt,
+        speed, then the accelerations where bounded)."""
         r_bound, tilt = self.p.radius_m, self.p.tilt_max_rad
-        lb = np.zeros((2 * self.n + 1, 4))
+        lb = np.tile(_path_bounds(self.p)[0], (2 * self.n + 1, 1))
         lb[:, 0] = self.cone_mps
         lb[:, 1] = r_bound**2 - (r_bound - self.radius_m) ** 2
         lb[:, 2] = np.cos(np.maximum(tilt - self.tilt_rad, 0.0)) - math.cos(tilt)
+        for col, (key, bound) in enumerate(_accel_bounds(self.p).items(), start=4):
+            lb[:, col] = bound**2 - (bound - self.accel_mps2[key]) ** 2
         return lb
 
     def raise_where(self, key: str, over_per_interval: np.ndarray, step: np.ndarray) -> bool:
         """Raise ``key``'s backoff by ``step`` on each interval whose overshoot is > 0 and on its
         neighbours (nodes k−1 … k+2, midpoints k−1 … k+1); False when nothing could be raised.
         The cone stays untouched at the two hover nodes, where its slack is exactly 0."""
-        arr = getattr(self, key)
+        arr = self.accel_mps2[key] if key in self.accel_mps2 else getattr(self, key)
         before = arr.copy()  # steps of neighbouring intervals overlap: each adds to the old value
         n = self.n
         moved = False
@@ -642,9 +712,11 @@ class _Backoff:
         return moved
 
     def summary(self) -> dict:
-        return {"tilt_rad": float(self.tilt_rad.max()), "radius_m": float(self.radius_m.max()),
-                "cone_mps": float(self.cone_mps.max()),
-                "share": float(np.mean((self.tilt_rad > 0) | (self.radius_m > 0) | (self.cone_mps > 0)))}  # fmt: skip
+        out = {"tilt_rad": float(self.tilt_rad.max()), "radius_m": float(self.radius_m.max()),
+               "cone_mps": float(self.cone_mps.max()),
+               "share": float(np.mean((self.tilt_rad > 0) | (self.radius_m > 0) | (self.cone_mps > 0)))}  # fmt: skip
+        out.update({f"{key}_mps2": float(arr.max()) for key, arr in self.accel_mps2.items()})
+        return out
 
 
 class _Tightening:
@@ -675,9 +747,10 @@ class _Tightening:
         if all(v <= 0 for v in over.values()):
             return False
         moved = False
-        for key, over_key, tol, unit in (("cone_mps", "cone_mps", CONE_TOL_MPS, 1.0),
-                                         ("radius_m", "radius_m", RADIUS_TOL_M, 1.0),
-                                         ("tilt_rad", "tilt_deg", TILT_TOL_DEG, math.radians(1.0))):  # fmt: skip
+        bounds = (("cone_mps", "cone_mps", CONE_TOL_MPS, 1.0), ("radius_m", "radius_m", RADIUS_TOL_M, 1.0),
+                  ("tilt_rad", "tilt_deg", TILT_TOL_DEG, math.radians(1.0)),
+                  *((key, f"{key}_mps2", ACCEL_TOL_MPS2, 1.0) for key in _accel_bounds(self.p)))  # fmt: skip
+        for key, over_key, tol, unit in bounds:
             if over[over_key] > 0:
                 step = (TIGHTEN_GAIN * per[over_key] + tol) * unit
                 moved |= self.backoff.raise_where(key, per[over_key], step)
@@ -687,7 +760,8 @@ class _Tightening:
 
 def _overshoots(p: HelixProblem, r: OcpResult):
     """How far the dense re-simulation exceeds each bound beyond its tolerance (≤ 0: fine), overall
-    and on each mesh interval: the cone (m/s), tilt (deg), radius (m)."""
+    and on each mesh interval: the cone (m/s), tilt (deg), radius (m), and the accelerations the
+    problem bounds (``accel_z_mps2``, ``accel_h_mps2``: m/s²)."""
     d = dense_path(r)
     n = len(r.t_s) - 1
     m = (len(d.t) - 1) // n  # dense samples per interval (rk4_piecewise: the start node, then m per interval)
@@ -698,6 +772,11 @@ def _overshoots(p: HelixProblem, r: OcpResult):
         "tilt_deg": _tilt_deg(d.x) - math.degrees(p.tilt_max_rad) - TILT_TOL_DEG,
         "radius_m": np.hypot(d.x[:, 0], d.x[:, 1]) - p.radius_m - RADIUS_TOL_M,
     }
+    bounds = _accel_bounds(p)
+    if bounds:
+        acc = commanded_accel_np(d.x, d.u)
+        size = {"accel_z": np.abs(acc[:, 2]), "accel_h": np.hypot(acc[:, 0], acc[:, 1])}
+        values.update({f"{key}_mps2": size[key] - b - ACCEL_TOL_MPS2 for key, b in bounds.items()})
     per = {}
     for key, v in values.items():
         per[key] = np.full(n, -np.inf)
@@ -723,6 +802,13 @@ def dense_path(r: OcpResult, rate_hz: float = 1000.0) -> DenseSolution:
     return rk4_piecewise(dynamics, r.t_s, r.x, r.u, rate_hz)
 
 
+def commanded_accel_np(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The acceleration ``v̇`` (M, 3), NED m/s², of states (M, 10) and controls (M, 4): what the
+    trajectory file carries as ``an/ae/ad`` and the autopilot is asked to fly."""
+    q = x[:, 6:10] / np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
+    return quat_to_rotmat(q)[:, :, 2] * (-u[:, 0:1]) + np.array([0.0, 0.0, G_MPS2])
+
+
 def _dense_figures(p: HelixProblem, r: OcpResult, rate_hz: float = 1000.0):
     d = dense_path(r, rate_hz)
     t, x, u = d.t, d.x, d.u
@@ -730,6 +816,7 @@ def _dense_figures(p: HelixProblem, r: OcpResult, rate_hz: float = 1000.0):
     margin = p.constraint.margin(w, u_air)
     i = int(np.argmin(margin))
     radius = np.hypot(x[:, 0], x[:, 1])
+    acc = commanded_accel_np(x, u)
     figures = {
         "rate_hz": rate_hz,
         "worst_margin_mps": float(margin[i]),
@@ -741,6 +828,9 @@ def _dense_figures(p: HelixProblem, r: OcpResult, rate_hz: float = 1000.0):
         "max_thrust_mps2": float(u[:, 0].max()),
         "max_speed_mps": float(np.linalg.norm(x[:, 3:6], axis=1).max()),
         "max_descent_mps": float(x[:, 5].max()),
+        "max_climb_mps": float(max(0.0, -x[:, 5].min())),
+        "max_accel_z_mps2": float(np.abs(acc[:, 2]).max()),
+        "max_accel_h_mps2": float(np.hypot(acc[:, 0], acc[:, 1]).max()),
         "end_position_error_m": float(np.linalg.norm(x[-1, :3] - [*p.end_ne_m, p.height_m])),
         "end_speed_mps": float(np.linalg.norm(x[-1, 3:6])),
         "node_gap_m": float(np.abs(d.gaps[:, :3]).max()),
@@ -760,8 +850,9 @@ def resimulation_check(sol: HelixSolution, rate_hz: float = 1000.0) -> dict:
     c = _dense_figures(p, r, rate_hz)
     w_n, u_n = blade_velocity_np(p, r.x)
     tol = {"cone_mps": CONE_TOL_MPS, "tilt_deg": TILT_TOL_DEG, "radius_m": RADIUS_TOL_M,
-           "controls_rel": CONTROL_TOL_REL, "node_gap_m": NODE_GAP_TOL_M}  # fmt: skip
+           "controls_rel": CONTROL_TOL_REL, "node_gap_m": NODE_GAP_TOL_M, "accel_mps2": ACCEL_TOL_MPS2}  # fmt: skip
     rate_lim = math.degrees(max(p.rate_max_rps))
+    accel_ok = all(c[f"max_{key}_mps2"] <= b + ACCEL_TOL_MPS2 for key, b in _accel_bounds(p).items())
     c.update({
         "node_worst_margin_mps": float(np.min(p.constraint.margin(w_n, u_n))),
         "turns": float(_turns(r.x)),
@@ -774,6 +865,7 @@ def resimulation_check(sol: HelixSolution, rate_hz: float = 1000.0) -> dict:
             and c["max_rate_dps"] <= rate_lim * (1 + CONTROL_TOL_REL)
             and p.f_min_mps2 - CONTROL_TOL_REL * p.f_max_mps2 <= c["min_thrust_mps2"]
             and c["max_thrust_mps2"] <= p.f_max_mps2 * (1 + CONTROL_TOL_REL)
+            and accel_ok
         ),
         "node_gap_ok": bool(c["node_gap_m"] <= NODE_GAP_TOL_M),
     })  # fmt: skip

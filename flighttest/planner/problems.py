@@ -15,6 +15,7 @@ from typing import Any
 
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
+from flighttest.planner.autopilot_limits import capped, plan_limits
 from flighttest.planner.cases import table_case
 from flighttest.planner.cone import VelocityConstraint
 from flighttest.planner.helix import HelixProblem, problem_for_vehicle
@@ -153,7 +154,12 @@ def probe_plan(profile: VehicleProfile, *, amplitude_m: float, omega0_rps2: floa
                max_descent_mps: float, duration_s: float, start_alt_m: float, floor_alt_m: float,
                speed_step_mps: float = 0.1, accel_fraction: float = 1.0) -> ProbePlan:  # fmt: skip
     """The probe reference (``probe.plan_probe``) within ``accel_fraction`` of the vehicle's up and
-    down accelerations."""
-    return plan_probe(amplitude_m, omega0_rps2, ramp_s, max_descent_mps, duration_s, start_alt_m, floor_alt_m,
-                      speed_step_mps, max_accel_down_mps2=accel_fraction * profile.max_accel_down_mps2,
-                      max_accel_up_mps2=accel_fraction * profile.max_accel_up_mps2)  # fmt: skip
+    down accelerations, and within its autopilot's vertical acceleration, descent and climb speeds where
+    the profile names them (``autopilot_limits.plan_limits``: GUIDED flies a faster sweep late)."""
+    limits = plan_limits(profile)
+    a_down = capped(accel_fraction * profile.max_accel_down_mps2, limits.accel_z_max_mps2)
+    a_up = capped(accel_fraction * profile.max_accel_up_mps2, limits.accel_z_max_mps2)
+    # every cycle climbs back to the start as fast as it went down: the cap holds for both
+    top = capped(capped(max_descent_mps, limits.descent_max_mps), limits.climb_max_mps)
+    return plan_probe(amplitude_m, omega0_rps2, ramp_s, top, duration_s, start_alt_m, floor_alt_m, speed_step_mps,
+                      max_accel_down_mps2=a_down, max_accel_up_mps2=a_up)  # fmt: skip

@@ -9,7 +9,8 @@ guard's boundary is aborted by the first centimetre per second of tracking error
 descent to ``MPC_Z_VEL_MAX_DN`` whatever the feed-forward says.
 
 ``TrackingMargin`` holds those margins (one place, one meaning, read from a mission's ``[plan]``
-table); ``helix_problem_for_flight`` turns a vehicle profile and the margins into the helix problem.
+table); ``helix_problem_for_flight`` turns a vehicle profile and the margins into the helix problem
+(within the profile's autopilot limits too, where it names them: ``helix.problem_for_vehicle``).
 Offline planning (``flighttest plan``) does not use them: it reproduces the paper's optimum.
 """
 
@@ -21,6 +22,7 @@ from typing import Any
 
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
+from flighttest.planner.autopilot_limits import capped
 from flighttest.planner.cone import VelocityConstraint
 from flighttest.planner.helix import HelixProblem, problem_for_vehicle
 
@@ -104,5 +106,6 @@ def helix_problem_for_flight(
     )
     n_thrust = profile.n_rotors * profile.max_thrust_per_rotor_n / profile.mass_kg
     f_min = max(p.f_min_mps2, margin.thrust_min_fraction * n_thrust)
-    return replace(p, f_min_mps2=f_min, descent_max_mps=margin.descent_max_mps,
-                   thrust_rate_max_mps3=margin.thrust_rate_max_mps3)
+    # the lower of the margin's descent bound and the one the profile's autopilot sets (problem_for_vehicle)
+    descent = capped(margin.descent_max_mps, p.descent_max_mps)
+    return replace(p, f_min_mps2=f_min, descent_max_mps=descent, thrust_rate_max_mps3=margin.thrust_rate_max_mps3)
