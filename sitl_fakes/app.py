@@ -19,7 +19,7 @@ from pathlib import Path
 
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import load_profile
-from sitl_fakes import px4
+from sitl_fakes import ardupilot, px4
 from sitl_fakes.disturbance import VrsTruth, default_onset_mps
 from sitl_fakes.estimator import EstimateError
 from sitl_fakes.link import Link, PortInUse
@@ -32,8 +32,16 @@ PARENT_POLL_S = 0.5
 MAX_CATCH_UP_S = 0.25
 
 
+AUTOPILOTS = ("px4", "ardupilot")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vehicle", default="x500", help="vehicle profile name or .toml path (default x500)")
+    p.add_argument("--autopilot", choices=AUTOPILOTS, default="px4",
+                   help="personality: px4 (PX4 v1.15 multicopter, default) or ardupilot (ArduCopter master 2026)")
+    p.add_argument("--ekf-delay-s", type=float, default=None, metavar="S",
+                   help=f"ardupilot: seconds from boot until the EKF has its origin and arming is allowed "
+                        f"(default {ardupilot.EKF_DELAY_S:g}, as ArduCopter SITL)")
     p.add_argument("--port", type=int, default=DEFAULT_PORT,
                    help=f"UDP port to listen on (default {DEFAULT_PORT}; 0 = any free port, printed on the first line)")
     p.add_argument("--bind", default="0.0.0.0", help="address to bind (default 0.0.0.0)")
@@ -61,7 +69,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gps-delay-s", type=float, default=0.0,
                    help="no valid position (arming denied) for this long after start (default 0)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="PX4 parameter value at boot, e.g. MIS_TAKEOFF_ALT=1.5 (repeatable)")
+                   help="autopilot parameter value at boot, e.g. MIS_TAKEOFF_ALT=1.5 (PX4) or MAV1_EXT_STAT=2 "
+                        "(ArduPilot) (repeatable)")
     p.add_argument("--sysid", type=int, default=1,
                    help="MAVLink system id (default 1; give two fakes different ids to test vehicle selection)")
     p.add_argument("--duration-s", type=float, default=0.0, help="exit after this long (default: run until stopped)")
@@ -107,12 +116,23 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
             raise FlighttestError(f"{name} must be ≥ 0 (got {value})")
     if not 0 <= args.port < 65536:
         raise FlighttestError(f"--port must be 0..65535 (got {args.port})")
+    ekf_delay = getattr(args, "ekf_delay_s", None)
+    if ekf_delay is not None:
+        if getattr(args, "autopilot", "px4") != "ardupilot":
+            raise FlighttestError("--ekf-delay-s is an ArduPilot option (--autopilot ardupilot)")
+        if not (math.isfinite(ekf_delay) and ekf_delay >= 0):
+            raise FlighttestError(f"--ekf-delay-s must be ≥ 0 (got {ekf_delay})")
     onset = default_onset_mps(profile.v_h_mps) if args.truth_onset is None else args.truth_onset
     try:
         truth = VrsTruth(onset, args.truth_cone_deg, args.truth_severity, args.seed, profile.v_h_mps)
     except ValueError as exc:
         raise FlighttestError(f"truth: {exc}") from None
+    home = {}
+    if getattr(args, "autopilot", "px4") == "ardupilot":  # ArduCopter SITL's home (the reference flights')
+        home = {"home_lat_deg": ardupilot.HOME_LAT_DEG, "home_lon_deg": ardupilot.HOME_LON_DEG,
+                "home_alt_m": ardupilot.HOME_ALT_M}  # fmt: skip
     return FakeConfig(
+        **home,
         profile=profile,
         truth=truth,
         wind_ned=_parse_triple(",".join(args.wind_ned), "--wind-ned"),
@@ -127,14 +147,24 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
 
 
 def _apply_params(vehicle: FakePx4, items: list[str]) -> None:
+    ardu = getattr(vehicle, "autopilot", "px4") == "ardupilot"
     for item in items:
         name, sep, value = item.partition("=")
         if not sep or name not in vehicle.params:
-            raise FlighttestError(f"--param: expected NAME=VALUE with a known PX4 parameter (got {item!r})")
+            which = "ArduPilot" if ardu else "PX4"
+            raise FlighttestError(f"--param: expected NAME=VALUE with a known {which} parameter (got {item!r})")
         param = vehicle.params[name]
         try:
-            param.value = int(value) if param.type == px4.PARAM_INT32 else float(value)
-        except ValueError:
+            if ardu:
+                number = float(value)
+                if param.type in ardupilot.INT_TYPES:
+                    if number != int(number):
+                        raise ValueError(value)
+                    number = int(number)
+                param.value = number
+            else:
+                param.value = int(value) if param.type == px4.PARAM_INT32 else float(value)
+        except (ValueError, OverflowError):
             raise FlighttestError(f"--param {name}: not a number ({value!r})") from None
         if isinstance(param.value, float) and not math.isfinite(param.value):
             raise FlighttestError(f"--param {name}: must be finite")
@@ -165,24 +195,37 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         link.close()
         raise FlighttestError(f"--truth-log {args.truth_log}: cannot write ({exc.strerror})") from None
-    vehicle = FakePx4(cfg, link, log, t0)
-    _apply_params(vehicle, args.param)
     truth_hz = args.truth_rate_hz or args.physics_hz
-    vehicle.telemetry = Telemetry(vehicle, cfg.telemetry_hz, truth_hz)
+    if args.autopilot == "ardupilot":
+        # imported here: the PX4 personality's start-up stays what it was
+        from sitl_fakes.ardupilot_telemetry import ArduPilotTelemetry
+        from sitl_fakes.ardupilot_vehicle import FakeArduCopter
+
+        ekf_delay = ardupilot.EKF_DELAY_S if args.ekf_delay_s is None else args.ekf_delay_s
+        vehicle: FakePx4 = FakeArduCopter(cfg, link, log, t0, ekf_delay_s=ekf_delay)
+        _apply_params(vehicle, args.param)  # before the telemetry: MAV1_* stream rates are read at boot
+        vehicle.telemetry = ArduPilotTelemetry(vehicle, cfg.telemetry_hz, truth_hz)
+    else:
+        vehicle = FakePx4(cfg, link, log, t0)
+        _apply_params(vehicle, args.param)
+        vehicle.telemetry = Telemetry(vehicle, cfg.telemetry_hz, truth_hz)
     stop = _Stop()
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     print(f"connect: udpout://127.0.0.1:{link.port}", flush=True)
     t = cfg.truth
+    personality = " (ardupilot)" if args.autopilot == "ardupilot" else ""  # PX4's lines stay as they were
     print(
-        f"sitl_fakes: {cfg.profile.name} v_h={cfg.profile.v_h_mps:.3f} m/s truth onset={t.onset_mps:.3f} m/s "
+        f"sitl_fakes: {cfg.profile.name}{personality} v_h={cfg.profile.v_h_mps:.3f} m/s "
+        f"truth onset={t.onset_mps:.3f} m/s "
         f"cone={t.cone_deg:g} deg severity={t.severity:g} seed={t.seed} truth_log={args.truth_log}",
         file=sys.stderr,
         flush=True,
     )
     vehicle.event(
         "event",
-        f"start vehicle={cfg.profile.name} onset_mps={t.onset_mps:.4f} cone_deg={t.cone_deg} "
+        f"start vehicle={cfg.profile.name}{personality.replace(' (', ' autopilot=').rstrip(')')} "
+        f"onset_mps={t.onset_mps:.4f} cone_deg={t.cone_deg} "
         f"severity={t.severity} seed={t.seed} wind_ned={cfg.wind_ned} gust_mps={cfg.gust_mps}",
     )
     try:
@@ -230,7 +273,8 @@ def _loop(vehicle: FakePx4, link: Link, log: TruthLog, dt: float, stop: _Stop, d
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m sitl_fakes",
-        description="A fake PX4 quadcopter with VRS/WBS physics and a ground-truth log (see sitl_fakes/README.md).",
+        description="A fake PX4 (or, --autopilot ardupilot, ArduCopter) quadcopter with VRS/WBS physics and a "
+                    "ground-truth log (see sitl_fakes/README.md).",
     )
     add_arguments(parser)
     args = parser.parse_args(argv)

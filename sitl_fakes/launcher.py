@@ -40,7 +40,8 @@ class FakeVehicle:
     """A running ``python -m sitl_fakes``. Context manager; ``stop()`` is idempotent.
 
     Keyword options map onto the command line: ``FakeVehicle(truth_onset=1.0, wind_ned=(2, 0, 0),
-    param={"MIS_TAKEOFF_ALT": 1.5}, peer=["127.0.0.1:14540"])``.
+    param={"MIS_TAKEOFF_ALT": 1.5}, peer=["127.0.0.1:14540"])``; ``autopilot="ardupilot", ekf_delay_s=2``
+    for the ArduCopter personality (``--autopilot ardupilot --ekf-delay-s 2``).
     """
 
     def __init__(
@@ -126,6 +127,15 @@ class FakeVehicle:
         if self.proc.stdout is not None:
             self.proc.stdout.close()
         return self.proc.returncode
+
+    def pilot(self, **kwargs):
+        """A pilot at the transmitter of an ArduCopter-personality fake (``sitl_fakes.pilot.Pilot``: RC
+        overrides from the ground station's sysid; ``switch("LOITER")``, ``sticks(throttle=…)``)."""
+        from sitl_fakes.pilot import Pilot
+
+        if self.url is None:
+            raise FlighttestError("the fake vehicle is not running")
+        return Pilot(self.url, **kwargs)
 
     def read_truth(self):
         """The truth log as a pandas DataFrame (state and event rows; see README)."""

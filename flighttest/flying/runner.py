@@ -81,6 +81,15 @@ def _healthy(st) -> bool:
     return bool(st.health) and all(st.health.values())
 
 
+READY_POSVEL_AGE_S = 0.5  # the local position counts as flowing when a sample is at most this old
+
+
+def _ready(st, now_s: float) -> bool:
+    """Healthy, and the estimator's local position flowing: ArduCopter reports its sensors healthy ~25 s
+    before its EKF has an origin and sends LOCAL_POSITION_NED at all (../shared/ardupilot_sitl, SITL)."""
+    return _healthy(st) and st.t_posvel is not None and now_s - st.t_posvel <= READY_POSVEL_AGE_S
+
+
 class MissionRunner:
     def __init__(self, req: FlyRequest, open_link: LinkFactory | None = None) -> None:
         self.req = req
@@ -379,11 +388,15 @@ class MissionRunner:
         t0 = self.now()
 
         def not_ok() -> list[str]:
-            return sorted(k.removeprefix("is_") for k, v in link.state.health.items() if not v)
+            bad = sorted(k.removeprefix("is_") for k, v in link.state.health.items() if not v)
+            if not _ready(link.state, self.now()) and not bad and link.state.health:
+                bad.append("no local position yet")
+            return bad
 
         self.event("waiting_for_health", not_ok=not_ok(), timeout_s=timeout_s)
         while self.now() - t0 < timeout_s:
-            if await link.wait_for(_healthy, min(HEALTH_PROGRESS_S, timeout_s - (self.now() - t0))):
+            wait_s = min(HEALTH_PROGRESS_S, timeout_s - (self.now() - t0))
+            if await link.wait_for(lambda st: _ready(st, self.now()), wait_s):
                 self.event("healthy", after_s=round(self.now() - t0, 1))
                 return
             missing = ", ".join(not_ok()) or "health not reported"
@@ -402,7 +415,7 @@ class MissionRunner:
                        why="disarmed in Offboard is not armable")  # fmt: skip
             with contextlib.suppress(Exception):
                 await link.hold(5.0)
-        if not _healthy(link.state):
+        if not _ready(link.state, self.now()):
             await self._wait_for_health(rules.health_wait_s)
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
         params = {}
