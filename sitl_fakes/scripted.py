@@ -265,6 +265,10 @@ class ScriptedAutopilot:
         def effect() -> None:
             if not self.on_ground:
                 raise RuntimeError(f"{what}: not on the ground")
+            if self.rules.name == ARDUPILOT and self.mode in ("LAND", "RTL", "AUTO", "BRAKE"):
+                # MAVSDK's arm switches LAND/RTL/AUTO to BRAKE first, where ArduCopter will not arm
+                self.mode = "BRAKE"
+                raise RuntimeError(f"{what}: denied (Arm: Mode not armable)")
             self.armed = True
             self._ground_since = None
 
@@ -305,6 +309,14 @@ class ScriptedAutopilot:
 
     async def stop_offboard(self, timeout_s: float, what: str = "offboard stop") -> None:
         await self._command("stop_offboard", what, timeout_s, self._enter_hold)
+
+    async def set_mode(self, name: str, timeout_s: float) -> None:
+        def effect() -> None:
+            self.hold_ned = self.p_ned.copy()
+            self.mode = name
+            self.taking_off = False
+
+        await self._command("set_mode", f"mode {name}", timeout_s, effect)
 
     def _enter_hold(self) -> None:
         self.hold_ned = self.p_ned.copy()

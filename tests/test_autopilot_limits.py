@@ -21,6 +21,7 @@ from flighttest.flying import autopilot as flying_autopilot
 from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
 from flighttest.flying.missions_config import load_mission_config
 from flighttest.flying.preflight import FAIL, ardupilot_param_checks, trajectory_stats
+from flighttest.model.aero import G_MPS2
 from flighttest.model.profiles import (
     AUTOPILOT_NAMES,
     AutopilotLimits,
@@ -38,7 +39,7 @@ from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
 from flighttest.planner.vertical import plan_vertical
 
 # ArduCopter's defaults (../shared/ardupilot_sitl): what arducopter_sitl.toml's [autopilot] table holds
-ARDUCOPTER = {"WP_ACC_Z": 1.0, "WP_ACC": 2.5, "WP_SPD_DN": 1.5, "WP_SPD_UP": 2.5}
+ARDUCOPTER = {"WP_ACC_Z": 1.0, "WP_ACC": 2.5, "WP_SPD_DN": 1.5, "WP_SPD_UP": 2.5, "PSC_JERK_NE": 5.0, "PSC_JERK_D": 5.0}
 FRACTION = AUTOPILOT_LIMIT_FRACTION
 # x500's 5 m helix as `flighttest plan helix --vehicle x500 --height 5` solves it, measured before the
 # autopilot limits existed: a profile without the table must plan exactly as before
@@ -72,7 +73,9 @@ def test_arducopter_sitl_carries_arducopters_defaults_and_the_others_none(ac):
     assert ac.autopilot == AutopilotLimits(name="ArduPilot", accel_z_max_mps2=ARDUCOPTER["WP_ACC_Z"],
                                            accel_h_max_mps2=ARDUCOPTER["WP_ACC"],
                                            descent_max_mps=ARDUCOPTER["WP_SPD_DN"],
-                                           climb_max_mps=ARDUCOPTER["WP_SPD_UP"])  # fmt: skip
+                                           climb_max_mps=ARDUCOPTER["WP_SPD_UP"],
+                                           jerk_h_max_mps3=ARDUCOPTER["PSC_JERK_NE"],
+                                           jerk_z_max_mps3=ARDUCOPTER["PSC_JERK_D"])  # fmt: skip
     text = Path(ac.path).read_text(encoding="utf-8")
     assert all(name in text for name in ARDUCOPTER)  # the comment cites the parameters
     for name in ("x500", "sih_quadx", "mambo", "tunnel_rig"):
@@ -87,7 +90,8 @@ def test_autopilot_names_are_the_flying_layers():
 def test_summary_and_round_trip(ac, x500, tmp_path):
     s = ac.summary()
     assert s["autopilot"] == {"name": "ArduPilot", "accel_z_max_mps2": 1.0, "accel_h_max_mps2": 2.5,
-                              "descent_max_mps": 1.5, "climb_max_mps": 2.5}  # fmt: skip
+                              "descent_max_mps": 1.5, "climb_max_mps": 2.5, "jerk_h_max_mps3": 5.0,
+                              "jerk_z_max_mps3": 5.0}  # fmt: skip
     json.dumps(s, allow_nan=False)
     assert load_profile(_write(tmp_path, ac, profile_to_dict(ac)["autopilot"])).autopilot == ac.autopilot
     # only a name and one limit: the others do not apply, and are left out when written back
@@ -284,3 +288,14 @@ def test_plan_vertical_cli_on_arducopter_sitl(ac, tmp_path):
     expected = vertical_trajectory(vertical_plan(ac, 3.0, extra_margin_mps=0.35, accel_fraction=0.15), ac.name,
                                    ac.mass_kg)  # fmt: skip
     assert traj.duration_s == pytest.approx(expected.duration_s)
+
+
+def test_the_autopilots_jerk_bounds_the_helix_tilt_rate_and_thrust_rate(ac, x500):
+    # ArduCopter ramps accelerations at PSC_JERK_NE / PSC_JERK_D: a plan that tilts faster than jerk / g, or
+    # changes thrust faster than jerk, is flown late and overshoots (its SITL's first helix, bench/RESULTS.md)
+    p = helix.problem_for_vehicle(ac)
+    tilt_rate = FRACTION * ARDUCOPTER["PSC_JERK_NE"] / G_MPS2
+    assert p.rate_max_rps[0] == pytest.approx(tilt_rate) and p.rate_max_rps[1] == pytest.approx(tilt_rate)
+    assert p.thrust_rate_max_mps3 == pytest.approx(FRACTION * ARDUCOPTER["PSC_JERK_D"])
+    q = helix.problem_for_vehicle(x500)
+    assert q.thrust_rate_max_mps3 is None and q.rate_max_rps[0] == pytest.approx(math.radians(x500.max_rate_dps[0]))

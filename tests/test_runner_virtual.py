@@ -371,3 +371,23 @@ def test_ardupilot_link_lost_stays_in_guided_braking_after_guid_timeout(tmp_path
     assert "the vehicle's own failsafe is in charge" in f.ladder()[-1][1]
     # no offboard-loss mode change on ArduPilot: GUID_TIMEOUT zeroes the targets, it holds in GUIDED
     assert f.ap.mode == "GUIDED" and f.ap.armed and f.ap.setpoint is None and f.ap.speed_mps < 0.05
+
+
+def test_ardupilot_second_flight_on_the_same_vehicle_arms_from_guided(tmp_path):
+    # the campaign flies several times without a reboot: ArduCopter is left disarmed in LAND, and MAVSDK's
+    # arm would turn that into BRAKE, where it refuses to arm; the preflight sets GUIDED first
+    cfg = _config()
+    traj = load_mission_module("vertical").plan(X500, cfg)
+    ap = ScriptedAutopilot(autopilot=ARDUPILOT, params=dict(AP_READY))
+    outcomes = []
+    for k in range(2):
+        req = FlyRequest("udpin://0.0.0.0:14540", X500, cfg, traj, "vertical", yes=True, log_root=tmp_path / str(k),
+                         print_fn=lambda _: None)  # fmt: skip
+        outcomes.append(run_virtual(MissionRunner(req, open_link=lambda _t, _e: ap).run()))
+        assert ap.mode == "LAND" and not ap.armed
+    assert [o.outcome for o in outcomes] == ["completed", "completed"]
+    heard = [c for _, c in ap.commands]
+    assert heard.count("arm") == 2 and heard[heard.index("land") + 1] == "set_mode"
+    events = [json.loads(x) for x in (Path(outcomes[1].log_dir) / "events.jsonl").read_text().splitlines()]
+    reset = next(e for e in events if e["event"] == "mode_reset")
+    assert (reset["old"], reset["new"]) == ("LAND", "GUIDED")

@@ -31,6 +31,8 @@ from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile, load_profile
 
 SIM_DEFAULT_PARAMS: Mapping[str, float] = {"MPC_Z_VEL_MAX_DN": 3.0}  # rehearsal: offboard descents unclipped
+# ArduCopter's defaults as they are: its plans fit them (the profile's [autopilot] limits) or the preflight says
+SIM_DEFAULT_PARAMS_ARDUPILOT: Mapping[str, float] = {}
 
 
 def _default_sim_params() -> dict[str, float]:
@@ -44,11 +46,15 @@ class SimOptions:
     truth_onset_mps: float | None = None
     wind_ned_mps: tuple[float, float, float] | None = None
     seed: int | None = None
-    params: Mapping[str, float] = field(default_factory=_default_sim_params)  # PX4 parameters, ints as ints
+    # the autopilot's parameters, ints as ints (PX4's or ArduPilot's names, as ``autopilot`` says)
+    params: Mapping[str, float] = field(default_factory=_default_sim_params)
+    autopilot: str = "px4"  # the fake's personality: "px4" or "ardupilot" (sitl_fakes --autopilot)
 
     def launcher_options(self) -> dict[str, Any]:
         """``FakeVehicle``'s keyword options (each one a flag of the fake's process)."""
         opts: dict[str, Any] = {"param": dict(self.params)}
+        if self.autopilot != "px4":
+            opts["autopilot"] = self.autopilot
         if self.truth_onset_mps is not None:
             opts["truth_onset"] = self.truth_onset_mps
         if self.wind_ned_mps:

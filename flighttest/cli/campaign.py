@@ -77,7 +77,11 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     g.add_argument("--sim-wind", type=float, nargs=3, metavar=("N", "E", "D"), help="the fake's wind, m/s NED")
     g.add_argument("--sim-seed", type=int, metavar="N", help="seed of the fake's fluctuations and gusts")
     g.add_argument("--sim-param", action="append", default=[], metavar="NAME=VALUE",
-                   help="a PX4 parameter of the fake (default MPC_Z_VEL_MAX_DN=3)")  # fmt: skip
+                   help="a parameter of the fake's autopilot (PX4 default MPC_Z_VEL_MAX_DN=3; ArduPilot: "
+                   "its defaults)")  # fmt: skip
+    g.add_argument("--sim-autopilot", choices=("px4", "ardupilot"), default="px4",
+                   help="the fake's personality: PX4 (default) or ArduCopter (GUIDED, BRAKE, its parameters, "
+                   "its EKF's 42 s start-up; fly it with --vehicle arducopter_sitl)")  # fmt: skip
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -98,15 +102,16 @@ def _validate(args: argparse.Namespace) -> SimOptions | None:
     """Every input checked before the fake starts or anything connects; returns the fake's options
     (None with --connect)."""
     from flighttest import inputs as ip
-    from flighttest.campaign.run import SIM_DEFAULT_PARAMS, SimOptions
+    from flighttest.campaign.run import SIM_DEFAULT_PARAMS, SIM_DEFAULT_PARAMS_ARDUPILOT, SimOptions
     from flighttest.flying.link import check_connection, check_url
 
     if args.connect:
         check_url(args.connect)
         if not args.vehicle:
             raise FlighttestError("--vehicle is required with --connect (the profile of the aircraft you fly)")
-        if args.truth_onset is not None or args.sim_wind or args.sim_seed is not None or args.sim_param:
-            raise FlighttestError("--truth-onset, --sim-wind, --sim-seed and --sim-param need --sim")
+        if (args.truth_onset is not None or args.sim_wind or args.sim_seed is not None or args.sim_param
+                or args.sim_autopilot != "px4"):  # fmt: skip
+            raise FlighttestError("--truth-onset, --sim-wind, --sim-seed, --sim-param and --sim-autopilot need --sim")
     if args.stale_periods is not None:
         STALE_PERIODS.check(args.stale_periods, "--stale-periods")
     if args.truth_onset is not None:
@@ -115,15 +120,17 @@ def _validate(args: argparse.Namespace) -> SimOptions | None:
         ip.WIND_MPS.check(w, f"--sim-wind {axis}")
     if args.sim_seed is not None:
         SEED.check(args.sim_seed, "--sim-seed")
-    params: dict[str, float] = dict(SIM_DEFAULT_PARAMS)
+    ardupilot = args.sim_autopilot == "ardupilot"
+    params: dict[str, float] = dict(SIM_DEFAULT_PARAMS_ARDUPILOT if ardupilot else SIM_DEFAULT_PARAMS)
     for item in args.sim_param:
-        name, value = _sim_param(item)
+        name, value = _sim_param(item, ardupilot)
         params[name] = value
     if args.connect:
         check_connection(args.connect)  # last: a host name may take a moment to resolve
         return None
     wind = tuple(args.sim_wind) if args.sim_wind else None
-    return SimOptions(truth_onset_mps=args.truth_onset, wind_ned_mps=wind, seed=args.sim_seed, params=params)
+    return SimOptions(truth_onset_mps=args.truth_onset, wind_ned_mps=wind, seed=args.sim_seed, params=params,
+                      autopilot=args.sim_autopilot)  # fmt: skip
 
 
 def _output_dir(text: str | Path) -> Path:
@@ -134,22 +141,28 @@ def _output_dir(text: str | Path) -> Path:
     return check_output_folder(text, "-o")
 
 
-def _sim_param(item: str) -> tuple[str, float]:
+def _sim_param(item: str, ardupilot: bool = False) -> tuple[str, float]:
     """``NAME=NUMBER`` for a parameter the fake has (its start would fail on any other, after the
     campaign had begun), integer parameters as integers."""
-    from sitl_fakes.px4 import PARAM_INT32, default_params
+    from sitl_fakes import ardupilot as ap
+    from sitl_fakes import px4
 
     name, sep, value = item.partition("=")
     name, value = name.strip(), value.strip()
-    known = default_params()
+    if ardupilot:
+        known = {k: p.type in ap.INT_TYPES for k, p in ap.default_params().items()}
+        where = "sitl_fakes/ardupilot.py"
+    else:
+        known = {k: p.type == px4.PARAM_INT32 for k, p in px4.default_params().items()}
+        where = "sitl_fakes/px4.py"
     if not sep or not name:
         raise FlighttestError(f"--sim-param must be NAME=NUMBER (got {shown(item)})")
     if name not in known:
-        raise FlighttestError(f"--sim-param {shown(name)}: not a parameter of the fake (see sitl_fakes/px4.py)")
+        raise FlighttestError(f"--sim-param {shown(name)}: not a parameter of the fake (see {where})")
     try:
-        number = int(value, 10) if known[name].type == PARAM_INT32 else float(value)
+        number = int(value, 10) if known[name] else float(value)
     except ValueError:
-        kind = "a whole number" if known[name].type == PARAM_INT32 else "a number"
+        kind = "a whole number" if known[name] else "a number"
         raise FlighttestError(f"--sim-param {name}: must be {kind} (got {shown(value)})") from None
     if not (math.isfinite(number) and abs(number) <= 1e6):  # no PX4 parameter the fake has goes beyond
         raise FlighttestError(f"--sim-param {name}: must be a finite number of at most 1e6 (got {shown(value)})")

@@ -33,8 +33,10 @@ class AutopilotRules:
     # leaving offboard by "offboard stop" reaches the hold mode (PX4); else the ladder asks for it (ArduPilot,
     # whose MAVSDK "offboard stop" would leave it in a pilot's mode)
     hold_by_offboard_stop: bool
-    # disarmed in the offboard mode is not armable without a setpoint stream (PX4): Hold first
-    reset_disarmed_offboard: bool
+    # disarmed in one of these the vehicle will not arm (PX4: Offboard without a setpoint stream; ArduCopter:
+    # LAND/RTL/AUTO, which MAVSDK's arm turns into BRAKE, "Mode not armable"): the preflight sets armable_mode
+    not_armable_modes: frozenset[str]
+    armable_mode: str
     # it leaves the offboard mode by itself when setpoints stop (PX4's COM_OF_LOSS_T); ArduPilot stays in
     # GUIDED and only zeroes its targets after GUID_TIMEOUT
     offboard_loss_failsafe: bool
@@ -51,7 +53,8 @@ class AutopilotRules:
 PX4_RULES = AutopilotRules(
     name=PX4, offboard_mode="OFFBOARD", hold_mode="HOLD", land_mode="LAND",
     pilot_modes=frozenset({"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE"}),
-    hold_by_offboard_stop=True, reset_disarmed_offboard=True, offboard_loss_failsafe=True,
+    hold_by_offboard_stop=True, not_armable_modes=frozenset({"OFFBOARD"}), armable_mode="HOLD",
+    offboard_loss_failsafe=True,
     health_wait_s=30.0, reads_mode_from_heartbeat=False,
 )  # fmt: skip
 
@@ -59,7 +62,8 @@ ARDUPILOT_RULES = AutopilotRules(
     name=ARDUPILOT, offboard_mode="GUIDED", hold_mode="BRAKE", land_mode="LAND",
     pilot_modes=frozenset({"STABILIZE", "ACRO", "ALT_HOLD", "LOITER", "POSHOLD", "DRIFT", "SPORT", "FLOWHOLD",
                            "ZIGZAG"}),
-    hold_by_offboard_stop=False, reset_disarmed_offboard=False, offboard_loss_failsafe=False,
+    hold_by_offboard_stop=False, not_armable_modes=frozenset({"LAND", "RTL", "AUTO", "BRAKE", "SMART_RTL", "AUTO_RTL"}),
+    armable_mode="GUIDED", offboard_loss_failsafe=False,
     health_wait_s=90.0, reads_mode_from_heartbeat=True,
 )  # fmt: skip
 
@@ -71,3 +75,10 @@ def rules_for(autopilot: str | None) -> AutopilotRules:
 
 def arducopter_mode_name(custom_mode: int) -> str:
     return ARDUCOPTER_MODES.get(int(custom_mode), f"MODE_{int(custom_mode)}")
+
+
+def arducopter_mode_number(name: str) -> int:
+    for number, mode in ARDUCOPTER_MODES.items():
+        if mode == name:
+            return number
+    raise ValueError(f"no ArduCopter mode {name!r}")

@@ -27,7 +27,14 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from flighttest.errors import FlighttestError
-from flighttest.flying.autopilot import ARDUPILOT, PX4_RULES, AutopilotRules, arducopter_mode_name, rules_for
+from flighttest.flying.autopilot import (
+    ARDUPILOT,
+    PX4_RULES,
+    AutopilotRules,
+    arducopter_mode_name,
+    arducopter_mode_number,
+    rules_for,
+)
 
 # what the streamer calls on MAVSDK's synchronous offboard plugin (VehicleLink.offboard_setters)
 OFFBOARD_SETTERS = ("set_position_velocity_acceleration_ned", "set_velocity_ned")
@@ -39,6 +46,8 @@ URL_HELP = "udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT or ser
 GCS_SYSID = 245
 GCS_COMPID = 190  # MAV_COMP_ID_MISSIONPLANNER
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_DO_SET_MODE = 176
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 SYS_STATUS_MSG_ID = 1
 # SYS_STATUS carries the sensor-health bits MAVSDK's health (and the preflight) is made of: ArduPilot
 # streams nothing unless asked (../shared/ardupilot_sitl: without it MAVSDK's health stayed false)
@@ -273,6 +282,7 @@ class Link(Protocol):
     async def hold(self, timeout_s: float, what: str = "hold") -> None: ...
     async def start_offboard(self, timeout_s: float, what: str = "offboard start") -> None: ...
     async def stop_offboard(self, timeout_s: float, what: str = "offboard stop") -> None: ...
+    async def set_mode(self, name: str, timeout_s: float) -> None: ...
     def offboard_setters(self) -> Any: ...
     async def get_param(self, name: str, kind: str = "float") -> float | int | None: ...
     async def get_all_params(self, timeout_s: float = 3.0) -> dict[str, float | int]: ...
@@ -496,6 +506,18 @@ class VehicleLink:
     async def stop_offboard(self, timeout_s: float, what: str = "offboard stop") -> None:
         await self.call(self.offboard.stop(), what, timeout_s)
 
+    async def set_mode(self, name: str, timeout_s: float) -> None:
+        """An ArduCopter mode by name (MAV_CMD_DO_SET_MODE with its custom mode): MAVSDK's own mode calls
+        reach only the modes of its FlightMode list, and its arm turns LAND into BRAKE, where ArduCopter
+        will not arm. Raises ``RuntimeError`` when refused."""
+        if self.rules.name != ARDUPILOT:
+            raise RuntimeError(f"set_mode({name}) is for ArduPilot; PX4's modes go through MAVSDK")
+        ack = await self.send_command_long(MAV_CMD_DO_SET_MODE, f"mode {name}", timeout_s,
+                                           MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, arducopter_mode_number(name))  # fmt: skip
+        result = json.loads(ack.fields_json or "{}").get("result") if ack is not None else None
+        if result not in (0, None):
+            raise RuntimeError(f"mode {name}: refused (MAV_RESULT {result})")
+
     # -- subscriptions -------------------------------------------------------------------------------
     async def _start_subscriptions(self) -> None:
         tel, st = self.telemetry, self.state
@@ -634,19 +656,23 @@ class VehicleLink:
             await asyncio.sleep(poll_s)
         return predicate(self.state)
 
+    async def send_command_long(self, command: int, what: str, timeout_s: float, *params: float):
+        """A COMMAND_LONG through MAVSDK's MavlinkDirect (for what its plugins do not send); its final
+        COMMAND_ACK as a ``MavlinkMessage``."""
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        p = [float(x) for x in params] + [0.0] * (7 - len(params))
+        fields = {"target_system": self.target_sysid, "target_component": AUTOPILOT_COMPID, "command": command,
+                  "confirmation": 0, **{f"param{i + 1}": v for i, v in enumerate(p)}}  # fmt: skip
+        cmd = MavlinkMessage("COMMAND_LONG", GCS_SYSID, GCS_COMPID, self.target_sysid, AUTOPILOT_COMPID,
+                             json.dumps(fields))  # fmt: skip
+        return await self.call(self.direct.send_command(cmd), what, timeout_s)
+
     async def request_message_rate(self, msg_id: int, rate_hz: float, what: str) -> None:
         """MAV_CMD_SET_MESSAGE_INTERVAL for a message MAVSDK has no rate setter for (SYS_STATUS on ArduPilot);
         a failure is a warning: the preflight reports what actually arrives."""
-        from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
-        fields = {"target_system": self.target_sysid, "target_component": AUTOPILOT_COMPID,
-                  "command": MAV_CMD_SET_MESSAGE_INTERVAL, "confirmation": 0, "param1": float(msg_id),
-                  "param2": 1e6 / rate_hz, "param3": 0.0, "param4": 0.0, "param5": 0.0, "param6": 0.0,
-                  "param7": 0.0}  # fmt: skip
-        cmd = MavlinkMessage("COMMAND_LONG", GCS_SYSID, GCS_COMPID, self.target_sysid, AUTOPILOT_COMPID,
-                             json.dumps(fields))  # fmt: skip
         try:
-            await self.call(self.direct.send_command(cmd), f"{what} rate", 5.0)
+            await self.send_command_long(MAV_CMD_SET_MESSAGE_INTERVAL, f"{what} rate", 5.0, msg_id, 1e6 / rate_hz)
             self._on_event("stream_requested", {"message": what, "rate_hz": rate_hz})
         except Exception as exc:
             self._on_event("warning", {"what": f"requesting {what} at {rate_hz:g} Hz failed: {exc}"})

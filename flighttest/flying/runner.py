@@ -408,13 +408,16 @@ class MissionRunner:
         link, req = self.link, self.req
         await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
         rules = self.rules
-        if rules.reset_disarmed_offboard and not link.state.armed and link.state.flight_mode == rules.offboard_mode:
-            # PX4 stays in Offboard after an offboard flight lands, and Offboard without a setpoint
-            # stream is not armable (the campaign's next flight on the same vehicle): Hold is armable
-            self.event("mode_reset", old=rules.offboard_mode, new=rules.hold_mode,
-                       why="disarmed in Offboard is not armable")  # fmt: skip
+        mode = link.state.flight_mode
+        if not link.state.armed and mode in rules.not_armable_modes:
+            # the campaign's next flight on the same vehicle: PX4 stays in Offboard after an offboard flight
+            # lands, ArduCopter in LAND; neither arms from there (autopilot.AutopilotRules.not_armable_modes)
+            self.event("mode_reset", old=mode, new=rules.armable_mode, why=f"disarmed in {mode} is not armable")
             with contextlib.suppress(Exception):
-                await link.hold(5.0)
+                if rules.armable_mode == rules.hold_mode:
+                    await link.hold(5.0)
+                else:
+                    await link.set_mode(rules.armable_mode, 5.0)
         if not _ready(link.state, self.now()):
             await self._wait_for_health(rules.health_wait_s)
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate

@@ -77,6 +77,9 @@ class AutopilotLimits:
     accel_h_max_mps2: float | None = None
     descent_max_mps: float | None = None
     climb_max_mps: float | None = None
+    # the jerk its position controller ramps accelerations with (ArduCopter: PSC_JERK_NE, PSC_JERK_D), m/s³
+    jerk_h_max_mps3: float | None = None
+    jerk_z_max_mps3: float | None = None
 
     def summary(self) -> dict[str, Any]:
         return asdict(self)
@@ -233,6 +236,8 @@ _AUTOPILOT_FIELDS: dict[str, Any] = {
     "accel_h_max_mps2": Range(0.0, 100.0, "m/s²", lo_open=True),
     "descent_max_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
     "climb_max_mps": Range(0.0, MAX_SPEED_MPS, "m/s", lo_open=True),
+    "jerk_h_max_mps3": Range(0.0, 1000.0, "m/s³", lo_open=True),
+    "jerk_z_max_mps3": Range(0.0, 1000.0, "m/s³", lo_open=True),
 }
 MAX_V_H_MPS = 50.0  # hover induced velocity: ~4 m/s on a Mambo, ~15 m/s on heavy lifters
 MAX_THRUST_TO_WEIGHT = 30.0  # racing quadcopters reach ~15

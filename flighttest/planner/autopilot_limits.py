@@ -27,12 +27,16 @@ class PlanLimits:
     accel_h_max_mps2: float | None = None
     descent_max_mps: float | None = None
     climb_max_mps: float | None = None
+    jerk_h_max_mps3: float | None = None  # m/s³: bounds the tilt rate (a_h ≈ g tan θ: jerk ≈ g θ̇)
+    jerk_z_max_mps3: float | None = None  # m/s³: bounds the collective thrust's rate
 
     def summary(self) -> dict[str, float | None]:
         return {"autopilot_accel_z_max_mps2": self.accel_z_max_mps2,
                 "autopilot_accel_h_max_mps2": self.accel_h_max_mps2,
                 "autopilot_descent_max_mps": self.descent_max_mps,
-                "autopilot_climb_max_mps": self.climb_max_mps}  # fmt: skip
+                "autopilot_climb_max_mps": self.climb_max_mps,
+                "autopilot_jerk_h_max_mps3": self.jerk_h_max_mps3,
+                "autopilot_jerk_z_max_mps3": self.jerk_z_max_mps3}  # fmt: skip
 
 
 NO_LIMITS = PlanLimits()
@@ -51,7 +55,9 @@ def plan_limits(profile: VehicleProfile, fraction: float = AUTOPILOT_LIMIT_FRACT
         return None if v is None else fraction * v
 
     return PlanLimits(accel_z_max_mps2=derated(ap.accel_z_max_mps2), accel_h_max_mps2=derated(ap.accel_h_max_mps2),
-                      descent_max_mps=derated(ap.descent_max_mps), climb_max_mps=derated(ap.climb_max_mps))  # fmt: skip
+                      descent_max_mps=derated(ap.descent_max_mps), climb_max_mps=derated(ap.climb_max_mps),
+                      jerk_h_max_mps3=derated(ap.jerk_h_max_mps3),
+                      jerk_z_max_mps3=derated(ap.jerk_z_max_mps3))  # fmt: skip
 
 
 def capped(value: float, cap: float | None) -> float:

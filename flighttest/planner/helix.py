@@ -190,6 +190,12 @@ def problem_for_vehicle(
     if rate_max_dps is not None:
         rates = tuple(min(r, math.radians(rate_max_dps)) for r in rates)
     rates = tuple(r - math.radians(rate_margin_dps) for r in rates)
+    limits = plan_limits(profile)
+    if limits.jerk_h_max_mps3 is not None:
+        # the autopilot ramps horizontal acceleration at its jerk limit, and a_h ≈ g tan θ: a tilt rate above
+        # jerk / g arrives late, then overshoots (ArduCopter SITL's helix, bench/RESULTS.md)
+        tilt_rate = limits.jerk_h_max_mps3 / G_MPS2
+        rates = (min(rates[0], tilt_rate), min(rates[1], tilt_rate), rates[2])
     tilt = profile.max_tilt_deg if tilt_max_deg is None else min(tilt_max_deg, profile.max_tilt_deg)
     tilt -= tilt_margin_deg
     if not (tilt > 0 and min(rates) > 0):
@@ -198,7 +204,6 @@ def problem_for_vehicle(
         constraint = VelocityConstraint(cone_deg=profile.vrs.cone_deg, margin_mps=profile.vrs.margin_mps)
     if extra_margin_mps:
         constraint = replace(constraint, margin_mps=constraint.margin_mps + extra_margin_mps)
-    limits = plan_limits(profile)
     return HelixProblem(
         height_m=height_m,
         radius_m=radius_m,
@@ -218,6 +223,7 @@ def problem_for_vehicle(
         climb_max_mps=limits.climb_max_mps,
         accel_z_max_mps2=limits.accel_z_max_mps2,
         accel_h_max_mps2=limits.accel_h_max_mps2,
+        thrust_rate_max_mps3=limits.jerk_z_max_mps3,
     )
 
 

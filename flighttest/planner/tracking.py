@@ -108,4 +108,5 @@ def helix_problem_for_flight(
     f_min = max(p.f_min_mps2, margin.thrust_min_fraction * n_thrust)
     # the lower of the margin's descent bound and the one the profile's autopilot sets (problem_for_vehicle)
     descent = capped(margin.descent_max_mps, p.descent_max_mps)
-    return replace(p, f_min_mps2=f_min, descent_max_mps=descent, thrust_rate_max_mps3=margin.thrust_rate_max_mps3)
+    thrust_rate = capped(margin.thrust_rate_max_mps3, p.thrust_rate_max_mps3)
+    return replace(p, f_min_mps2=f_min, descent_max_mps=descent, thrust_rate_max_mps3=thrust_rate)
