@@ -104,6 +104,7 @@ def test_a_nominal_flight_descends_times_its_descent_and_lands(tmp_path):
     assert reached["height_error_m"] <= 0.2
     assert f.summary["final_armed"] is False and f.summary["final_mode"] == "LAND"
     assert f.ap.p_ned[2] == 0.0 and not f.ap.armed
+    assert f.ap.takeoff_alt_m == START_M  # PX4's takeoff is asked for the start height, as ever
     assert "ladder" not in f.summary
     phases = [e["phase"] for e in f.events if e["event"] == "phase"]
     assert phases == ["connect", "preflight", "arm", "takeoff", "climb", "settle", "stream", "settle", "land",
@@ -332,6 +333,7 @@ def test_ardupilot_flies_the_descent_in_guided_and_lands(tmp_path):
     assert autopilot["offboard_mode"] == "GUIDED" and autopilot["hold_mode"] == "BRAKE"
     assert {e["new"] for e in f.events if e["event"] == "mode"} == {"GUIDED", "LAND"}
     assert f.summary["final_mode"] == "LAND" and not f.ap.armed
+    assert f.ap.takeoff_alt_m == 2.0  # its takeoff stops at the handover, at rest, not on its way to START_M
 
 
 def test_ardupilot_abort_brakes_then_lands(tmp_path):

@@ -138,3 +138,22 @@ def test_tilt_from_acceleration_when_no_attitude(tmp_path):
     )  # fmt: skip
     with pytest.raises(FlighttestError, match=r"tilt|thrust"):
         tr.validate(load_profile("x500"))
+
+
+def test_sample_times_never_print_two_rows_at_one_time(tmp_path):
+    # the campaign's vertical on the ArduCopter fake (w_allow 0.55 identified, cruise 0.1 m/s): its cruise
+    # ended at 50.000000001 s beside the grid's 50.0, and the saved file could not be loaded again
+    from flighttest.model.profiles import load_profile
+    from flighttest.model.trajectory import SAMPLE_MIN_GAP_FRACTION, sample_times
+    from flighttest.planner.export import vertical_trajectory
+    from flighttest.planner.vertical import plan_vertical
+
+    t = sample_times(50.000000001, 100.0, (1.0 / 9.0, 50.000000001))
+    assert t[0] == 0.0 and 50.000000001 in t and np.diff(t).min() >= SAMPLE_MIN_GAP_FRACTION / 100.0
+    ac = load_profile("arducopter_sitl")
+    vp = plan_vertical(ac, height_m=5.0, w_allow_mps=0.5499999999999998, margin_mps=0.44999999999999996,
+                       accel_fraction=0.15)  # fmt: skip
+    traj = vertical_trajectory(vp, ac.name, ac.mass_kg)
+    traj.save(tmp_path / "vertical.csv")
+    again = Trajectory.load(tmp_path / "vertical.csv")
+    assert again.duration_s == pytest.approx(vp.t_f_s)

@@ -44,6 +44,9 @@ class AutopilotRules:
     # 10-odd s; ArduCopter SITL 42 s from boot to "EKF3 IMU0 is using GPS" (../shared/ardupilot_sitl)
     health_wait_s: float
     reads_mode_from_heartbeat: bool  # MAVSDK's FlightMode cannot tell its modes apart (module docstring)
+    # its takeoff is asked for the handover height only (ArduCopter: it stops there, at rest, in GUIDED),
+    # rather than the start height it would still be climbing towards at the handover (PX4)
+    takeoff_to_handover: bool = False
 
     def describe(self) -> dict[str, object]:
         return {"autopilot": self.name, "offboard_mode": self.offboard_mode, "hold_mode": self.hold_mode,
@@ -64,7 +67,7 @@ ARDUPILOT_RULES = AutopilotRules(
                            "ZIGZAG"}),
     hold_by_offboard_stop=False, not_armable_modes=frozenset({"LAND", "RTL", "AUTO", "BRAKE", "SMART_RTL", "AUTO_RTL"}),
     armable_mode="GUIDED", offboard_loss_failsafe=False,
-    health_wait_s=90.0, reads_mode_from_heartbeat=True,
+    health_wait_s=90.0, reads_mode_from_heartbeat=True, takeoff_to_handover=True,
 )  # fmt: skip
 
 

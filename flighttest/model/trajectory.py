@@ -475,3 +475,18 @@ def _json_safe(obj: Any) -> Any:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
+
+
+# a grid time this close to a phase boundary is dropped: the file's 9 significant digits would print the
+# two as one time (the vertical's t2 = 50.000000001 beside the grid's 50.0: "time not strictly increasing")
+SAMPLE_MIN_GAP_FRACTION = 0.01
+
+
+def sample_times(t_f_s: float, rate_hz: float, breaks_s: tuple[float, ...] = ()) -> np.ndarray:
+    """A ``rate_hz`` grid from 0 to ``t_f_s`` with the phase boundaries ``breaks_s`` and ``t_f_s`` in it,
+    strictly increasing by at least ``SAMPLE_MIN_GAP_FRACTION`` of a period."""
+    grid = np.arange(0.0, t_f_s, 1.0 / rate_hz)
+    keys = np.array([*breaks_s, t_f_s], dtype=float)
+    near = np.min(np.abs(grid[:, None] - keys[None, :]), axis=1) < SAMPLE_MIN_GAP_FRACTION / rate_hz
+    near[0] = False  # the start stays: every boundary lies after it
+    return np.union1d(grid[~near], keys)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flighttest.errors import FlighttestError
+from flighttest.model.trajectory import SAMPLE_MIN_GAP_FRACTION
 
 
 @dataclass(frozen=True)
@@ -91,7 +92,8 @@ def plan_probe(amplitude_m: float = 2.0, omega0_rps2: float = 0.05, ramp_s: floa
             "probe: not one whole cycle after the ramp fits within the speed cap, the acceleration limits "
             "and the duration (raise --duration or --max-descent-speed, or lower --omega0 / --ramp)"
         )
-    t = np.union1d(t[t < t_end], [t_end])
+    # no grid time within a hundredth of a period of the end: the file would print the two as one time
+    t = np.union1d(t[t < t_end - SAMPLE_MIN_GAP_FRACTION / rate_hz], [t_end])
     d, v, a = _profile(t, amplitude_m, omega0_rps2, ramp_s, rate_sat)
     d[-1] = v[-1] = 0.0
     firsts = []

@@ -24,6 +24,7 @@ import numpy as np
 
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
+from flighttest.model.trajectory import sample_times
 from flighttest.planner.autopilot_limits import capped, plan_limits
 
 
@@ -71,7 +72,7 @@ def plan_vertical(profile: VehicleProfile, height_m: float = 5.0, w_allow_mps: f
     t1 = cruise / a_dn
     t2 = t1 + (height_m - d_acc - d_dec) / cruise
     t_f = t2 + cruise / a_up
-    t = np.union1d(np.arange(0.0, t_f, 1.0 / rate_hz), [t1, t2, t_f])
+    t = sample_times(t_f, rate_hz, (t1, t2))
     v = np.where(t < t1, a_dn * t, np.where(t < t2, cruise, cruise - a_up * (t - t2)))
     v = np.clip(v, 0.0, cruise)
     d = np.where(
