@@ -471,6 +471,9 @@ class MissionRunner:
         self.guard.armed = True
         await link.arm(10.0)
         self.event("armed")
+        # the takeoff is judged from where the estimate puts the ground now: after a landing it may sit a few
+        # tenths off home (the ArduCopter fake's second flight: 0.3 m below), and the takeoff climbs from there
+        ground_m = st.alt_m if math.isfinite(st.alt_m) and abs(st.alt_m) < 1.0 else 0.0
         self.set_phase(Phase.TAKEOFF)
         with contextlib.suppress(Exception):
             # ArduCopter's takeoff ends where asked and holds there: asked for the start height it is still
@@ -479,7 +482,7 @@ class MissionRunner:
             await link.set_takeoff_altitude(min(H, HANDOVER_ALT_M) if self.rules.takeoff_to_handover else H, 5.0)
         await link.takeoff(10.0)
         handover_m = min(H, HANDOVER_ALT_M)
-        ok = await link.wait_for(lambda s: s.alt_m >= handover_m - 0.3 and s.in_air, fl.takeoff_timeout_s)
+        ok = await link.wait_for(lambda s: s.alt_m - ground_m >= handover_m - 0.3 and s.in_air, fl.takeoff_timeout_s)
         if not ok:
             raise RuntimeError(f"takeoff did not reach {handover_m:.1f} m within {fl.takeoff_timeout_s:g} s")
         # offboard from here: climb to the exact start point, holding the trajectory's initial yaw
