@@ -70,7 +70,8 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     # the identified onset is the fake's truth, stored in the campaign's profile copy, never the user's
     # within the probe's stated tolerance (tests/test_probe_identify.py: the PX4-like estimate's vertical
     # error is 0.16 m/s, correlated over 3 s)
-    assert s["identified_w_allow_mps"] == pytest.approx(TRUTH_ONSET_MPS, abs=0.15)
+    assert s["identified_w_allow_mps"] == pytest.approx(TRUTH_ONSET_MPS, abs=0.15), json.loads(
+        (out / "identify.json").read_text())
     assert Path(s["identified_profile"]) == out / "vehicles" / "x500.toml"
     assert CampaignState.open(out, "x500").steps["plan"].outputs["w_allow_mps"] == s["identified_w_allow_mps"]
     assert not (tmp_path / "my_vehicles").exists()

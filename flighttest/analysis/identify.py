@@ -261,7 +261,8 @@ class Onset:
     max_speed_mps: float
     samples: int
     rise_ratio: float  # fitted RMS fluctuation at max_speed_mps / hover's
-    bootstrap_sd_mps: float
+    bootstrap_sd_mps: float  # the replicates' plain standard deviation, their far tail and all
+    bootstrap_spread_mps: float  # half the width of their central 68 %: what the uncertainty takes
     resolution_mps: float
     signals: tuple[str, ...]
     bins: pd.DataFrame  # fluctuation power (data and fit) binned by speed, for plots and reports
@@ -458,7 +459,13 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         pick = (starts[:, None] + np.arange(block)[None, :]).ravel()[:n]
         boots.append(_onset_from(mu * ratio[pick], zs, grid, cfg.irls_iterations)[0])
     boots = np.asarray(boots)
-    boot_sd = float(np.nanstd(boots)) if np.isfinite(boots).sum() > 1 else 0.0
+    finite = boots[np.isfinite(boots)]
+    boot_sd = float(np.std(finite)) if len(finite) > 1 else 0.0
+    # the spread is the central 68 % interval's half-width, not the standard deviation: a few replicates
+    # in a hundred jump to the slowest speeds (a block of past-the-onset scatter resampled onto them),
+    # and on a PX4-like estimate those alone made the fake's onset, read 0.950 where it is 0.95, ±0.19
+    # (20 %, near refusal), where the central replicates span ±0.07
+    spread = float(np.subtract(*np.percentile(finite, [84.0, 16.0]))) / 2.0 if len(finite) > 1 else 0.0
     # speed resolution: the grid (uniform, /√12), and how far w moves in the two sample periods the
     # fluctuation signal needs (the difference, and the alignment of the IMU and position streams),
     # taken as a uniform error of that half-width (/√3)
@@ -466,7 +473,7 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     dw = np.abs(np.gradient(w_filled, t))[near] * 2.0 * dt
     lag_w = float(np.median(dw)) if len(dw) else 0.0
     resolution = math.sqrt(cfg.step_mps**2 / 12.0 + lag_w**2 / 3.0)
-    unc = math.sqrt(boot_sd**2 + resolution**2)
+    unc = math.sqrt(spread**2 + resolution**2)
     why = implausible(w0, unc, profile, float(grid[0]))
     if why:
         raise ImplausibleOnset(f"{log.name}: onset {w0:.3f} ± {unc:.3f} m/s is not a plausible VRS onset for "
@@ -484,6 +491,7 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         samples=int(use.sum()),
         rise_ratio=rise,
         bootstrap_sd_mps=boot_sd,
+        bootstrap_spread_mps=spread,
         resolution_mps=resolution,
         signals=ps.signals,
         bins=_bins(w_all[use], y, b0, b1, w0),
