@@ -75,8 +75,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="MAVLink system id (default 1; give two fakes different ids to test vehicle selection)")
     p.add_argument("--duration-s", type=float, default=0.0, help="exit after this long (default: run until stopped)")
     p.add_argument("--estimate-error", type=float, default=1.0, metavar="SCALE",
-                   help="scales the estimate's offset from the truth (PX4-like height offset and horizontal "
-                        "wander; default 1, 0 = a perfect estimator)")
+                   help="scales the estimate's offset from the truth (PX4 SIH's EKF2, or with --autopilot "
+                        "ardupilot ArduCopter SITL's EKF3; default 1, 0 = a perfect estimator)")
     p.add_argument("--telemetry-gap-rate-hz", type=float, default=0.1, metavar="HZ",
                    help="how often the telemetry goes quiet for 50-100 ms, as real links do "
                         "(default 0.1 per second; 0 = never)")
@@ -127,8 +127,9 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
         truth = VrsTruth(onset, args.truth_cone_deg, args.truth_severity, args.seed, profile.v_h_mps)
     except ValueError as exc:
         raise FlighttestError(f"truth: {exc}") from None
-    home = {}
+    home, error = {}, EstimateError()
     if getattr(args, "autopilot", "px4") == "ardupilot":  # ArduCopter SITL's home (the reference flights')
+        error = ardupilot.SITL_ESTIMATE_ERROR
         home = {"home_lat_deg": ardupilot.HOME_LAT_DEG, "home_lon_deg": ardupilot.HOME_LON_DEG,
                 "home_alt_m": ardupilot.HOME_ALT_M}  # fmt: skip
     return FakeConfig(
@@ -141,7 +142,7 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
         crash_speed_mps=args.crash_speed_mps,
         gps_delay_s=args.gps_delay_s,
         telemetry_hz=args.telemetry_hz,
-        estimate_error=EstimateError().scaled(args.estimate_error),
+        estimate_error=error.scaled(args.estimate_error),
         telemetry_gap_rate_hz=args.telemetry_gap_rate_hz,
     )
 

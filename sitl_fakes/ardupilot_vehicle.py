@@ -26,7 +26,7 @@ import time
 from flighttest.model.aero import G_MPS2
 from sitl_fakes import ardupilot as ap
 from sitl_fakes.ardupilot import CopterMode
-from sitl_fakes.ardupilot_control import PosControl, copter_limits, sqrt_controller
+from sitl_fakes.ardupilot_control import THR_MIN, PosControl, VerticalAccelPid, copter_limits, sqrt_controller
 from sitl_fakes.control import NAN, Limits, Target, finite
 from sitl_fakes.link import Link, mavlink
 from sitl_fakes.physics import rotate_body_to_ned
@@ -114,6 +114,7 @@ class FakeArduCopter(_FakeVehicleBase):
         self.gcs_last_seen: float | None = None  # MAV_GCS_SYSID's last heartbeat / RC override / MANUAL_CONTROL
         self.failsafe_gcs = False
         self.collective_filtered = 0.0  # the motors' throttle filter (THROTTLE_CUTOFF_HZ)
+        self.accel_pid = VerticalAccelPid(self.p)
 
     # -- helpers -------------------------------------------------------------------------------------
     def position_valid(self) -> bool:
@@ -405,7 +406,14 @@ class FakeArduCopter(_FakeVehicleBase):
     # -- control -------------------------------------------------------------------------------------
     def _fly(self, dt_s: float, target: Target, lim: Limits) -> list[float]:
         s = self.est
-        bz, collective = self.ctrl.thrust_setpoint(dt_s, s, target, lim)
+        bz, _ = self.ctrl.thrust_setpoint(dt_s, s, target, lim)
+        # the cascade gives the tilt; the collective is ArduCopter's acceleration PID, boosted for the tilt
+        # flown (AC_AttitudeControl_Multi::get_throttle_boosted)
+        cos_tilt = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
+        limited = not THR_MIN < self.collective_filtered < 1.0
+        thr = self.accel_pid.throttle(-self.ctrl.acc_setpoint_ned[2], -self.body.state.ad_mps2, lim.thr_hover,
+                                      limited, dt_s)  # fmt: skip
+        collective = min(max(thr / min(max(cos_tilt, 0.1), 1.0), THR_MIN), 1.0)
         alpha = dt_s / (dt_s + 1.0 / (2.0 * math.pi * THROTTLE_CUTOFF_HZ))
         self.collective_filtered += alpha * (collective - self.collective_filtered)
         collective = self.collective_filtered
@@ -427,6 +435,7 @@ class FakeArduCopter(_FakeVehicleBase):
     def _idle(self) -> list[float]:
         self.ctrl.reset(self.est)
         self.collective_filtered = 0.0
+        self.accel_pid.reset()
         return [IDLE_THRUST_FRACTION * self.profile.max_thrust_per_rotor_n] * 4
 
     def _control(self, dt_s: float) -> list[float]:
@@ -484,7 +493,7 @@ class FakeArduCopter(_FakeVehicleBase):
             self._init_ne((s.n_m, s.e_m, s.d_m), (s.vn_mps, s.ve_mps, s.vd_mps))
             self.pc.init_d(s.d_m, s.vd_mps, 0.0)
             self.ctrl.reset(s)
-            self.ctrl.vel_int[2] = 0.0
+            self.accel_pid.reset(self.throttle - self.limits().thr_hover)
 
     def _guided(self, dt_s: float, lim: Limits) -> list[float]:
         pc = self.pc

@@ -76,6 +76,8 @@ class Limits:
     z_vel_p: float = 4.0
     z_vel_i: float = 2.0
     z_vel_d: float = 0.0
+    # low-pass of the vertical velocity error before its P and I (0: none, PX4; ArduCopter's PSC_D_VEL_FLTE)
+    z_vel_err_lp_hz: float = 0.0
     veld_lp_hz: float = 5.0  # MPC_VELD_LP
     thr_hover: float = 0.5  # MPC_THR_HOVER (the fake sets the vehicle's true hover thrust)
     thr_min: float = 0.12  # MPC_THR_MIN
@@ -170,6 +172,10 @@ class Controller:
         self.yaw_hold_rad = 0.0
         self.last_collective_n = 0.0
         self.last_u = [0.0, 0.0, 0.0, 0.0]
+        # the last acceleration setpoint (NED, velocity loop plus feed-forward): ArduCopter's personality
+        # closes its own vertical acceleration loop on it
+        self.acc_setpoint_ned = [0.0, 0.0, 0.0]
+        self._z_vel_err_f = 0.0
         self._vel_prev: tuple[float, float, float] | None = None
         self._vel_dot = [0.0, 0.0, 0.0]
         self._rates_f: list[float] | None = None
@@ -179,6 +185,7 @@ class Controller:
     def reset(self, s: RigidBodyState) -> None:
         self.vel_int = [0.0, 0.0, 0.0]
         self.rate_int = [0.0, 0.0, 0.0]
+        self._z_vel_err_f = 0.0
         self.yaw_hold_rad = s.yaw_rad()
 
     # -- PositionControl -----------------------------------------------------------------------------
@@ -204,10 +211,15 @@ class Controller:
         gi = (lim.xy_vel_i, lim.xy_vel_i, lim.z_vel_i)
         gd = (lim.xy_vel_d, lim.xy_vel_d, lim.z_vel_d)
         vel_err = [vel_sp[i] - vel[i] for i in range(3)]
+        if lim.z_vel_err_lp_hz > 0.0 and finite(vel_err[2]):
+            alpha = dt_s / (dt_s + 1.0 / (2.0 * math.pi * lim.z_vel_err_lp_hz))
+            self._z_vel_err_f += alpha * (vel_err[2] - self._z_vel_err_f)
+            vel_err[2] = self._z_vel_err_f
         acc_sp = [
             _add_if_not_nan(t.acc[i], vel_err[i] * gp[i] + self.vel_int[i] - self._vel_dot[i] * gd[i]) for i in range(3)
         ]
         acc_sp = [a if finite(a) else 0.0 for a in acc_sp]
+        self.acc_setpoint_ned = acc_sp
         thr = self._acceleration_control(acc_sp, lim)
         # vertical anti-windup
         if (thr[2] >= -lim.thr_min and vel_err[2] >= 0.0) or (thr[2] <= -lim.thr_max and vel_err[2] <= 0.0):

@@ -62,25 +62,26 @@ def plan_vertical(profile: VehicleProfile, height_m: float = 5.0, w_allow_mps: f
         )
     a_dn = capped(accel_fraction * profile.max_accel_down_mps2, limits.accel_z_max_mps2)
     a_up = capped(accel_fraction * profile.max_accel_up_mps2, limits.accel_z_max_mps2)
-    # Distance to reach cruise and to stop from it.
-    d_acc = cruise**2 / (2 * a_dn)
-    d_dec = cruise**2 / (2 * a_up)
-    if d_acc + d_dec > height_m:  # triangular: peak speed below cruise
-        cruise = math.sqrt(2 * height_m / (1 / a_dn + 1 / a_up))
-        d_acc = cruise**2 / (2 * a_dn)
-        d_dec = cruise**2 / (2 * a_up)
-    t1 = cruise / a_dn
-    t2 = t1 + (height_m - d_acc - d_dec) / cruise
-    t_f = t2 + cruise / a_up
-    t = sample_times(t_f, rate_hz, (t1, t2))
-    v = np.where(t < t1, a_dn * t, np.where(t < t2, cruise, cruise - a_up * (t - t2)))
+    jerk = limits.jerk_z_max_mps3 or math.inf
+    if _ramps(cruise, a_dn, a_up, jerk)[2] > height_m:  # too short to reach cruise: the fastest peak that fits
+        lo, hi = 0.0, cruise
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _ramps(mid, a_dn, a_up, jerk)[2] <= height_m else (lo, mid)
+        cruise = lo
+    down, up, d_ramps = _ramps(cruise, a_dn, a_up, jerk)
+    t1 = down.duration_s
+    t2 = t1 + (height_m - d_ramps) / cruise
+    t_f = t2 + up.duration_s
+    t = sample_times(t_f, rate_hz, (*down.breaks_s, t1, t2, *(t2 + b for b in up.breaks_s)))
+    a_acc, v_acc, d_acc = down.at(np.minimum(t, t1))
+    tau = np.clip(t - t2, 0.0, up.duration_s)  # time into the braking
+    a_brk, v_brk, d_brk = up.at(tau)
+    d_t2 = down.distance_m + cruise * (t2 - t1)
+    v = np.where(t < t1, v_acc, np.where(t < t2, cruise, cruise - v_brk))
+    d = np.where(t < t1, d_acc, np.where(t < t2, down.distance_m + cruise * (t - t1), d_t2 + cruise * tau - d_brk))
+    a = np.where(t < t1, a_acc, np.where(t < t2, 0.0, -a_brk))
     v = np.clip(v, 0.0, cruise)
-    d = np.where(
-        t < t1,
-        0.5 * a_dn * t**2,
-        np.where(t < t2, d_acc + cruise * (t - t1), height_m - 0.5 * a_up * np.maximum(t_f - t, 0.0) ** 2),
-    )
-    a = np.where(t < t1, a_dn, np.where(t < t2, 0.0, -a_up))
     a[-1] = 0.0
     v[-1], d[-1] = 0.0, height_m
     problem = {
@@ -92,6 +93,61 @@ def plan_vertical(profile: VehicleProfile, height_m: float = 5.0, w_allow_mps: f
         "a_down_mps2": a_dn,
         "a_up_mps2": a_up,
         "cruise_mps": cruise,
+        "jerk_z_mps3": jerk if math.isfinite(jerk) else None,
         **limits.summary(),
     }
     return VerticalPlan(t, d, v, a, cruise, a_dn, a_up, float(t_f), problem)
+
+
+@dataclass(frozen=True)
+class _SpeedRamp:
+    """From rest to ``speed_mps`` with acceleration ≤ ``accel_mps2`` changing at ≤ ``jerk_mps3`` (inf: a
+    step): the acceleration ramps up, holds, ramps down, symmetric about its middle."""
+
+    speed_mps: float
+    accel_mps2: float  # the peak reached (below the limit when the speed change is too small for it)
+    jerk_mps3: float
+
+    @property
+    def ramp_s(self) -> float:
+        return self.accel_mps2 / self.jerk_mps3 if math.isfinite(self.jerk_mps3) else 0.0
+
+    @property
+    def duration_s(self) -> float:
+        return self.speed_mps / self.accel_mps2 + self.ramp_s
+
+    @property
+    def distance_m(self) -> float:  # the speed is point-symmetric about the ramp's middle
+        return 0.5 * self.speed_mps * self.duration_s
+
+    @property
+    def breaks_s(self) -> tuple[float, ...]:
+        return (self.ramp_s, self.duration_s - self.ramp_s) if self.ramp_s > 0 else ()
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Acceleration, speed and distance at times ``t`` in [0, duration]."""
+        j, a_pk, c, big_t, tj = self.jerk_mps3, self.accel_mps2, self.speed_mps, self.duration_s, self.ramp_s
+        t = np.clip(t, 0.0, big_t)
+        if tj == 0.0:
+            return np.where(t < big_t, a_pk, 0.0), a_pk * t, 0.5 * a_pk * t**2
+        rest = big_t - t
+        v_tj = 0.5 * j * tj**2
+        first, last = t < tj, t > big_t - tj
+        acc = np.where(first, j * t, np.where(last, j * rest, a_pk))
+        vel = np.where(first, 0.5 * j * t**2, np.where(last, c - 0.5 * j * rest**2, v_tj + a_pk * (t - tj)))
+        dist = np.where(first, j * t**3 / 6.0,
+                        np.where(last, c * t - 0.5 * c * big_t + j * rest**3 / 6.0,
+                                 j * tj**3 / 6.0 + v_tj * (t - tj) + 0.5 * a_pk * (t - tj) ** 2))  # fmt: skip
+        return acc, vel, dist
+
+
+def _speed_ramp(speed_mps: float, accel_mps2: float, jerk_mps3: float) -> _SpeedRamp:
+    if math.isfinite(jerk_mps3) and speed_mps < accel_mps2**2 / jerk_mps3:  # the acceleration never levels off
+        accel_mps2 = math.sqrt(speed_mps * jerk_mps3)
+    return _SpeedRamp(speed_mps, accel_mps2, jerk_mps3)
+
+
+def _ramps(cruise_mps: float, a_dn: float, a_up: float, jerk: float) -> tuple[_SpeedRamp, _SpeedRamp, float]:
+    """The speeding-up and the braking ramps of a cruise, and the height they take together."""
+    down, up = _speed_ramp(cruise_mps, a_dn, jerk), _speed_ramp(cruise_mps, a_up, jerk)
+    return down, up, down.distance_m + up.distance_m
