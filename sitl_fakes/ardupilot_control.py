@@ -51,7 +51,7 @@ from collections.abc import Callable
 
 from flighttest.model.aero import G_MPS2
 from flighttest.model.profiles import VehicleProfile
-from sitl_fakes.control import NAN, Limits, Target, finite
+from sitl_fakes.control import NAN, Limits, Target, finite, lowpass_alpha
 
 OVERSPEED_GAIN_U = 2.0  # POSCONTROL_OVERSPEED_GAIN_U
 ACCEL_D_MAX_MPS2 = 7.5  # the vertical shaping never asks for more than 7.5 m/s² up (constrain_float(…, 0, 7.5))
@@ -451,17 +451,13 @@ class VerticalAccelPid:
 
     def throttle(self, target_up_mps2: float, measured_up_mps2: float, hover: float, limited: bool,
                  dt_s: float) -> float:  # fmt: skip
-        self._meas_up_mps2 += _lowpass_alpha(self.p("INS_ACCEL_FILTER"), dt_s) * (measured_up_mps2 - self._meas_up_mps2)
+        self._meas_up_mps2 += lowpass_alpha(self.p("INS_ACCEL_FILTER"), dt_s) * (measured_up_mps2 - self._meas_up_mps2)
         err = target_up_mps2 - self._meas_up_mps2
-        self._err_mps2 += _lowpass_alpha(self.p("PSC_D_ACC_FLTE"), dt_s) * (err - self._err_mps2)
+        self._err_mps2 += lowpass_alpha(self.p("PSC_D_ACC_FLTE"), dt_s) * (err - self._err_mps2)
         if not limited:
             imax = self.p("PSC_D_ACC_IMAX")
             self.integrator = min(max(self.integrator + self.p("PSC_D_ACC_I") * self._err_mps2 * dt_s, -imax), imax)
         return hover + self.p("PSC_D_ACC_P") * self._err_mps2 + self.integrator
-
-
-def _lowpass_alpha(cutoff_hz: float, dt_s: float) -> float:
-    return dt_s / (dt_s + 1.0 / (2.0 * math.pi * cutoff_hz)) if cutoff_hz > 0.0 else 1.0
 
 
 def copter_limits(p: Callable[[str], float], profile: VehicleProfile) -> Limits:

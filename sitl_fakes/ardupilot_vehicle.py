@@ -27,7 +27,7 @@ from flighttest.model.aero import G_MPS2
 from sitl_fakes import ardupilot as ap
 from sitl_fakes.ardupilot import CopterMode
 from sitl_fakes.ardupilot_control import THR_MIN, PosControl, VerticalAccelPid, copter_limits, sqrt_controller
-from sitl_fakes.control import NAN, Limits, Target, finite
+from sitl_fakes.control import NAN, Limits, Target, finite, lowpass_alpha
 from sitl_fakes.link import Link, mavlink
 from sitl_fakes.physics import rotate_body_to_ned
 from sitl_fakes.truthlog import TruthLog
@@ -414,8 +414,7 @@ class FakeArduCopter(_FakeVehicleBase):
         thr = self.accel_pid.throttle(-self.ctrl.acc_setpoint_ned[2], -self.body.state.ad_mps2, lim.thr_hover,
                                       limited, dt_s)  # fmt: skip
         collective = min(max(thr / min(max(cos_tilt, 0.1), 1.0), THR_MIN), 1.0)
-        alpha = dt_s / (dt_s + 1.0 / (2.0 * math.pi * THROTTLE_CUTOFF_HZ))
-        self.collective_filtered += alpha * (collective - self.collective_filtered)
+        self.collective_filtered += lowpass_alpha(THROTTLE_CUTOFF_HZ, dt_s) * (collective - self.collective_filtered)
         collective = self.collective_filtered
         yaw = target.yaw_rad
         if finite(target.yaw_rate_radps) and not finite(yaw):

@@ -161,6 +161,11 @@ def _limit_tilt(bz: list[float], max_angle: float) -> list[float]:
     return [math.sin(angle) * rx / n, math.sin(angle) * ry / n, math.cos(angle)]
 
 
+def lowpass_alpha(cutoff_hz: float, dt_s: float) -> float:
+    """The gain of a first-order low-pass at ``cutoff_hz`` stepped by ``dt_s`` (≤ 0 Hz: no filter)."""
+    return dt_s / (dt_s + 1.0 / (2.0 * math.pi * cutoff_hz)) if cutoff_hz > 0.0 else 1.0
+
+
 class Controller:
     """The cascade's state (integrators, filters) for one vehicle; every gain comes in ``Limits``."""
 
@@ -212,8 +217,7 @@ class Controller:
         gd = (lim.xy_vel_d, lim.xy_vel_d, lim.z_vel_d)
         vel_err = [vel_sp[i] - vel[i] for i in range(3)]
         if lim.z_vel_err_lp_hz > 0.0 and finite(vel_err[2]):
-            alpha = dt_s / (dt_s + 1.0 / (2.0 * math.pi * lim.z_vel_err_lp_hz))
-            self._z_vel_err_f += alpha * (vel_err[2] - self._z_vel_err_f)
+            self._z_vel_err_f += lowpass_alpha(lim.z_vel_err_lp_hz, dt_s) * (vel_err[2] - self._z_vel_err_f)
             vel_err[2] = self._z_vel_err_f
         acc_sp = [
             _add_if_not_nan(t.acc[i], vel_err[i] * gp[i] + self.vel_int[i] - self._vel_dot[i] * gd[i]) for i in range(3)
@@ -258,7 +262,7 @@ class Controller:
         self._vel_prev = vel
         if prev is None or dt_s <= 0:
             return
-        a = dt_s / (dt_s + 1.0 / (2.0 * math.pi * lim.veld_lp_hz)) if lim.veld_lp_hz > 0 else 1.0
+        a = lowpass_alpha(lim.veld_lp_hz, dt_s)
         for i in range(3):
             self._vel_dot[i] += a * ((vel[i] - prev[i]) / dt_s - self._vel_dot[i])
 
@@ -294,8 +298,8 @@ class Controller:
             self._rates_f = list(rates)
             self._rates_f_prev = list(rates)
             return self._rates_f
-        a = dt_s / (dt_s + 1.0 / (2.0 * math.pi * GYRO_CUTOFF_HZ))
-        b = dt_s / (dt_s + 1.0 / (2.0 * math.pi * DGYRO_CUTOFF_HZ))
+        a = lowpass_alpha(GYRO_CUTOFF_HZ, dt_s)
+        b = lowpass_alpha(DGYRO_CUTOFF_HZ, dt_s)
         for i in range(3):
             prev = self._rates_f[i]
             self._rates_f[i] += a * (rates[i] - prev)
@@ -411,4 +415,4 @@ def _quat_from_z_and_yaw(bz, yaw_rad):
     return ((xy - yx) / sq, (zx + xz) / sq, (zy + yz) / sq, 0.25 * sq)
 
 
-__all__ = ["NAN", "Controller", "Limits", "Target", "allocate", "finite", "rotate_ned_to_body"]
+__all__ = ["NAN", "Controller", "Limits", "Target", "allocate", "finite", "lowpass_alpha", "rotate_ned_to_body"]
