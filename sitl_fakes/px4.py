@@ -62,6 +62,8 @@ def default_params() -> dict[str, Param]:
         "MPC_TILTMAX_AIR": Param(45.0, f),
         "MPC_TKO_SPEED": Param(1.5, f),
         "MPC_LAND_SPEED": Param(0.7, f),
+        "MPC_LAND_ALT1": Param(10.0, f),
+        "MPC_LAND_ALT2": Param(5.0, f),
         "MPC_XY_P": Param(0.95, f),
         "MPC_Z_P": Param(1.0, f),
         "MPC_XY_VEL_P_ACC": Param(1.8, f),

@@ -17,12 +17,17 @@ models). It keeps what the runner's decisions depend on, for PX4 (``autopilot=PX
 - a position loop (P on position, velocity feed-forward, P on velocity, acceleration feed-forward,
   bounded acceleration) — not the dynamics: a level vehicle with yaw 0, so body axes are NED's;
 - telemetry at ``telemetry_hz`` with a little seeded noise on rates and acceleration (the guard's hover
-  baseline needs some), and MAVSDK's late "disconnected" after the heartbeats stop.
+  baseline needs some), and MAVSDK's late "disconnected" after the heartbeats stop;
+- what MAVSDK reads from the heartbeat (armed, the mode) at ``heartbeat_hz`` only, as PX4 and ArduCopter
+  send it (1 Hz): an arm is acknowledged up to a second before the armed flag says so; the landed state
+  (EXTENDED_SYS_STATE) at ``landed_state_hz``;
+- an estimate that may read ``height_offset_m`` high on the ground, attitude samples stamped with the
+  vehicle's own clock, and a wind report (WIND_COV) only where a script gives one.
 
 A script is a list of rules, ``when(condition, action)`` or ``after(condition, delay_s, action)``,
 checked every physics step, plus the switches below (``push``, ``pilot``, ``lose_link``,
-``stop_telemetry``, ``unanswered``, ``ignored``, ``refused``). ``commands`` records every command the
-vehicle heard, with its time.
+``stop_telemetry``, ``stop_attitude``, ``delay_telemetry``, ``report_wind``, ``unanswered``, ``ignored``,
+``refused``). ``commands`` records every command the vehicle heard, with its time.
 """
 
 from __future__ import annotations
@@ -41,7 +46,8 @@ from flighttest.flying.link import TelemetryState
 G_MPS2 = 9.80665
 PX4_PARAMS: dict[str, float | int] = {
     "COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0, "COM_RC_OVERRIDE": 1, "MPC_Z_VEL_MAX_DN": 1.5, "MPC_Z_P": 1.0,
-    "MPC_XY_P": 0.95, "MPC_ACC_DECOUPLE": 1,
+    "MPC_XY_P": 0.95, "MPC_ACC_DECOUPLE": 1, "MPC_LAND_SPEED": 0.7, "MPC_Z_V_AUTO_DN": 1.5, "MPC_LAND_ALT1": 10.0,
+    "MPC_LAND_ALT2": 5.0,
 }  # fmt: skip
 # ArduCopter master's defaults (../shared/ardupilot_sitl, the DataFlash PARM records)
 ARDUPILOT_PARAMS: dict[str, float | int] = {
@@ -49,6 +55,9 @@ ARDUPILOT_PARAMS: dict[str, float | int] = {
     "WP_SPD_UP": 2.5, "WP_ACC_Z": 1.0, "WP_ACC": 2.5, "WP_JERK": 1.0, "PSC_JERK_D": 5.0, "LAND_SPD_MS": 0.5,
     "FENCE_ENABLE": 0, "DISARM_DELAY": 10, "PSC_D_POS_P": 1.0,
 }  # fmt: skip
+
+
+HISTORY_S = 5.0  # how far back a delayed stream may reach (``delay_telemetry``)
 
 
 @dataclass
@@ -83,6 +92,9 @@ class ScriptedAutopilot:
     velocity_gain_per_s: float = 4.0
     max_accel_mps2: float = 10.0
     disconnect_report_s: float = 3.0  # MAVSDK says "disconnected" this long after the heartbeats stop
+    heartbeat_hz: float = 1.0  # armed and the mode reach the ground station with the heartbeat
+    landed_state_hz: float = 10.0  # EXTENDED_SYS_STATE, as the link asks for it
+    height_offset_m: float = 0.0  # the estimate's height reads this much high (on the ground too)
     rate_noise_rps: float = 0.01
     accel_noise_mps2: float = 0.05
     seed: int = 0
@@ -114,6 +126,7 @@ class ScriptedAutopilot:
         self.on_mode: list[Callable[[str, str], None]] = []
         self.on_connection: list[Callable[[bool], None]] = []
         self.commands: list[tuple[float, str]] = []
+        self.listener_errors: list[str] = []
         self.p_ned = np.zeros(3)
         self.v_ned = np.zeros(3)
         self.a_ned = np.zeros(3)
@@ -125,6 +138,14 @@ class ScriptedAutopilot:
         self.resending = False  # MAVSDK re-sends the last setpoint from offboard.start() to offboard.stop()
         self.link_up = True
         self.telemetry_on = True
+        self.attitude_on = True
+        self.telemetry_delay_s = 0.0
+        self._history: list[tuple[float, np.ndarray, np.ndarray]] = []  # (t, p, v): what a late stream shows
+        self.wind_report: tuple[float, float, float] | None = None
+        self.wind_accuracy_mps = math.nan
+        self._boot_t: float | None = None
+        self._next_heartbeat_t = 0.0
+        self._next_landed_t = 0.0
         self._link_lost_t: float | None = None
         self._reported_connected = True
         self._push: tuple[np.ndarray, float] | None = None  # external acceleration, until
@@ -171,6 +192,19 @@ class ScriptedAutopilot:
     def resume_telemetry(self) -> None:
         self.telemetry_on = True
 
+    def stop_attitude(self) -> None:
+        """The attitude stream alone stops; position-velocity and the IMU keep coming."""
+        self.attitude_on = False
+
+    def delay_telemetry(self, delay_s: float) -> None:
+        """From now on every state sample arrives ``delay_s`` late, at the same steady rate, stamped with the
+        vehicle's time of the state it carries (a queue building up somewhere on the link)."""
+        self.telemetry_delay_s = delay_s
+
+    def report_wind(self, wind_ned_mps: tuple[float, float, float] | None, accuracy_mps: float = math.nan) -> None:
+        """The autopilot's wind estimate (WIND_COV) from now on; None: it stops reporting one."""
+        self.wind_report, self.wind_accuracy_mps = wind_ned_mps, accuracy_mps
+
     def heard(self, name: str) -> list[float]:
         """When the vehicle heard command ``name``."""
         return [t for t, c in self.commands if c == name]
@@ -185,6 +219,8 @@ class ScriptedAutopilot:
     # -- the link ------------------------------------------------------------------------------------
     async def open(self) -> None:
         self._loop = asyncio.get_running_loop()
+        self._boot_t = self.now() - 100.0  # the vehicle booted a while ago: its clock is not ours
+        self._next_heartbeat_t = self.now()  # MAVSDK found the vehicle by a heartbeat: known before open returns
         self.state.health = {k: True for k in ("is_gyrometer_calibration_ok", "is_accelerometer_calibration_ok",
                                                "is_local_position_ok", "is_global_position_ok",
                                                "is_home_position_ok", "is_armable")}  # fmt: skip
@@ -228,6 +264,8 @@ class ScriptedAutopilot:
         if not self.link_up:
             return
         zero = np.zeros(3)
+        if p is not None:  # the setpoint is in the estimate's frame, which reads height_offset_m high
+            p = np.asarray(p, float) + np.array([0.0, 0.0, self.height_offset_m])
         self.setpoint = _Setpoint(zero if p is None else np.asarray(p, float), np.asarray(v, float),
                                   zero if a is None else np.asarray(a, float), p is None, self.now())  # fmt: skip
 
@@ -418,42 +456,65 @@ class ScriptedAutopilot:
             return
         if not self._reported_connected:
             self._report_connection(True)
-        st.armed = self.armed
         in_air = self.armed and not (self.p_ned[2] >= -0.05 and self._ground_since is not None) and (
             self.p_ned[2] < -0.05 or self.taking_off)
         st.in_air = in_air
-        st.landed_state = "IN_AIR" if in_air else "ON_GROUND"
-        if st.flight_mode != self.mode:
-            old, st.flight_mode = st.flight_mode, self.mode
-            for cb in self.on_mode:
-                cb(old, self.mode)
+        if now >= self._next_landed_t - 1e-9:
+            self._next_landed_t = now + 1.0 / self.landed_state_hz
+            st.report_landed("IN_AIR" if in_air else "ON_GROUND", now)
+        if now >= self._next_heartbeat_t - 1e-9:
+            self._next_heartbeat_t += 1.0 / self.heartbeat_hz
+            st.report_armed(self.armed, now)
+            if st.flight_mode != self.mode:
+                old, st.flight_mode = st.flight_mode, self.mode
+                self._emit(self.on_mode, old, self.mode)
         if not self.telemetry_on:
             return
-        st.n_m, st.e_m, st.d_m = (float(x) for x in self.p_ned)
-        st.vn_mps, st.ve_mps, st.vd_mps = (float(x) for x in self.v_ned)
+        self._history.append((now, self.p_ned.copy(), self.v_ned.copy()))
+        while len(self._history) > 1 and self._history[0][0] < now - HISTORY_S:
+            self._history.pop(0)
+        t_state, p, v = now, self.p_ned, self.v_ned
+        if self.telemetry_delay_s > 0:  # the newest state at least that old
+            t_state, p, v = next((h for h in reversed(self._history) if h[0] <= now - self.telemetry_delay_s + 1e-9),
+                                 self._history[0])  # fmt: skip
+        st.n_m, st.e_m, st.d_m = float(p[0]), float(p[1]), float(p[2]) - self.height_offset_m
+        st.vn_mps, st.ve_mps, st.vd_mps = (float(x) for x in v)
         st.t_posvel = now
         st.count("posvel", now)
-        for cb in self.on_posvel:
-            cb(now)
-        st.q = (1.0, 0.0, 0.0, 0.0)
-        st.t_att = now
-        st.count("attitude", now)
-        for cb in self.on_attitude:
-            cb(now)
+        self._emit(self.on_posvel, now)
+        if self.attitude_on:
+            st.q = (1.0, 0.0, 0.0, 0.0)
+            st.t_att = now
+            st.t_att_vehicle_s = t_state - self._boot_t
+            st.count("attitude", now)
+            self._emit(self.on_attitude, now)
+        if self.wind_report is not None:
+            st.wind_ned_mps, st.wind_accuracy_mps, st.t_wind = self.wind_report, self.wind_accuracy_mps, now
         noise = self._rng.normal(size=6)
         st.rates_rps = tuple(float(x) for x in noise[:3] * self.rate_noise_rps)
         f = self.a_ned - np.array([0.0, 0.0, G_MPS2]) if self.armed else np.array([0.0, 0.0, -G_MPS2])
         st.accel_frd_mps2 = tuple(float(x) for x in f + noise[3:] * self.accel_noise_mps2)
         st.t_imu = now
         st.count("imu", now)
-        for cb in self.on_imu:
-            cb(now)
+        self._emit(self.on_imu, now)
 
     def _report_connection(self, connected: bool) -> None:
         self._reported_connected = connected
         self.state.connected = connected
-        for cb in self.on_connection:
-            cb(connected)
+        self._emit(self.on_connection, connected)
+
+    def _emit(self, listeners: list[Callable[..., None]], *args: Any) -> None:
+        """Each listener, as MAVSDK's subscriptions call them (``flighttest.flying.link``): one that raises is
+        recorded in ``listener_errors`` and the stream goes on."""
+        for cb in listeners:
+            try:
+                cb(*args)
+            except Exception as exc:
+                self.listener_errors.append(repr(exc))
+
+    def heartbeat_now(self) -> None:
+        """The next telemetry step sends a heartbeat (armed, the mode), whatever its phase."""
+        self._next_heartbeat_t = self.now()
 
     @property
     def speed_mps(self) -> float:

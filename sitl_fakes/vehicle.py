@@ -252,6 +252,15 @@ class FakePx4:
 
     rtl_phase = ""
 
+    def _land_speed_mps(self, height_m: float) -> float:
+        """PX4's Land descends at MPC_Z_V_AUTO_DN above MPC_LAND_ALT1, at MPC_LAND_SPEED below MPC_LAND_ALT2,
+        linearly between (its FlightTaskAuto; PX4 SITL's Land from 7.3 m ran at 1.0 m/s at 6 m, ../shared/px4_sih)."""
+        slow, fast = self.p("MPC_LAND_SPEED"), self.p("MPC_Z_V_AUTO_DN")
+        alt1, alt2 = self.p("MPC_LAND_ALT1"), self.p("MPC_LAND_ALT2")
+        if height_m <= alt2 or alt1 <= alt2:
+            return slow
+        return slow + (min(height_m, alt1) - alt2) / (alt1 - alt2) * (fast - slow)
+
     def _start_rtl(self, why: str) -> None:
         self.rtl_phase = "return"
         s = self.est
@@ -291,7 +300,7 @@ class FakePx4:
             if not finite(self.hold_target.pos[0]):
                 self._hold_here()
             target = Target(pos=[self.hold_target.pos[0], self.hold_target.pos[1], NAN],
-                            vel=[NAN, NAN, self.p("MPC_LAND_SPEED")], yaw_rad=self.hold_target.yaw_rad)  # fmt: skip
+                            vel=[NAN, NAN, self._land_speed_mps(-s.d_m)], yaw_rad=self.hold_target.yaw_rad)  # fmt: skip
             self.active_sp = ("land", 0, target)
         elif mode is Mode.RTL:
             target = self.target

@@ -121,7 +121,8 @@ def test_an_unreported_battery_warns_but_does_not_stop():
     assert c.status == pf.WARN
 
 
-PX4_DEFAULTS = {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0, "COM_RC_OVERRIDE": 1, "MPC_Z_VEL_MAX_DN": 1.5}
+PX4_DEFAULTS = {"COM_OF_LOSS_T": 1.0, "COM_OBL_RC_ACT": 0, "COM_RC_OVERRIDE": 1, "MPC_Z_VEL_MAX_DN": 1.5,
+                "MPC_LAND_SPEED": 0.7, "MPC_Z_V_AUTO_DN": 1.5, "MPC_LAND_ALT1": 10.0, "MPC_LAND_ALT2": 5.0}
 
 
 def test_param_checks_on_px4_defaults():
@@ -131,7 +132,34 @@ def test_param_checks_on_px4_defaults():
     # PX4's default lets sticks take over only in position modes, not offboard: worth a warning
     assert checks["COM_RC_OVERRIDE"].status == pf.WARN
     assert checks["MPC_Z_VEL_MAX_DN"].status == pf.PASS
-    assert checks["PX4 descents after an abort"].status == pf.WARN
+    # the ladder's Land from 4 m descends at MPC_LAND_SPEED (below MPC_LAND_ALT2 5 m): below w_allow
+    assert checks["PX4 Land after an abort"].status == pf.PASS
+
+
+def test_px4_land_from_above_land_alt2_is_faster_than_w_allow_and_says_what_to_set():
+    # PX4 SITL's Land from 7.3 m ran at 1.0 m/s at 6 m (../shared/px4_sih): between MPC_LAND_ALT2 and ALT1
+    # it interpolates towards MPC_Z_V_AUTO_DN
+    assert pf.px4_land_speed_mps(PX4_DEFAULTS, 7.0) == pytest.approx(0.7 + 2.0 / 5.0 * 0.8)
+    assert pf.px4_land_speed_mps(PX4_DEFAULTS, 12.0) == 1.5 and pf.px4_land_speed_mps(PX4_DEFAULTS, 3.0) == 0.7
+    c = _by_name(pf.param_checks(PX4_DEFAULTS, descent_max_mps=1.3, w_allow_mps=0.85, height_max_m=7.0))
+    land = c["PX4 Land after an abort"]
+    assert land.status == pf.WARN and land.value.startswith("1.02 m/s from 7.0 m")
+    assert "raise MPC_LAND_ALT1/ALT2 above 7.0 m" in land.requirement
+    raised = {**PX4_DEFAULTS, "MPC_LAND_ALT1": 9.0, "MPC_LAND_ALT2": 8.0}
+    assert _by_name(pf.param_checks(raised, 1.3, 0.85, 7.0))["PX4 Land after an abort"].status == pf.PASS
+
+
+def test_the_estimates_height_on_the_ground_is_checked_and_said():
+    assert pf.ground_height_check(0.1).status == pf.PASS
+    c = pf.ground_height_check(0.9)
+    assert c.status == pf.WARN and "+0.90 m" in c.value
+    assert pf.ground_height_check(-4.0).status == pf.FAIL and pf.ground_height_check(math.nan).status == pf.FAIL
+
+
+def test_free_disk_for_the_log_is_checked(tmp_path):
+    assert pf.disk_check(tmp_path, 60.0, 50.0).status == pf.PASS  # 6 MB
+    assert pf.disk_check(tmp_path, 1e9, 50.0).status == pf.FAIL  # 100 TB
+    assert pf.disk_check(tmp_path / "gone", 60.0, 50.0).status == pf.FAIL
 
 
 @pytest.mark.parametrize(

@@ -10,85 +10,19 @@ disk. The real-time flights against the UDP fake (``-m flight``) stay: they cove
 from __future__ import annotations
 
 import json
-import tomllib
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
+from virtual_flight import DESCENT_M, START_M, X500, Flight, config, fly, in_phase
 
 from flighttest.flying import guard as gd
 from flighttest.flying.autopilot import ARDUPILOT
-from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
-from flighttest.flying.missions_config import mission_config_from_dict
-from flighttest.flying.runner import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, FlightOutcome, FlyRequest, MissionRunner
-from flighttest.model.profiles import load_profile
+from flighttest.flying.mission_scripts import load_mission_module
+from flighttest.flying.runner import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, FlyRequest, MissionRunner
 from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
 from sitl_fakes.scripted import ScriptedAutopilot
 from sitl_fakes.virtual_time import run_virtual
-
-X500 = load_profile("x500")
-START_M, DESCENT_M = 4.0, 2.0
-LOG_FILES = ("meta.json", "summary.json", "events.jsonl", "setpoints.csv", "guard.csv", "preflight.json",
-             "params.json", "trajectory.csv")  # fmt: skip
-
-
-@dataclass
-class Flight:
-    outcome: FlightOutcome
-    ap: ScriptedAutopilot
-    runner: MissionRunner
-    events: list[dict[str, Any]]
-    summary: dict[str, Any]
-
-    def ladder(self) -> list[tuple[str, str]]:
-        return [(x["rung"], x["why"]) for x in self.summary.get("ladder", [])]
-
-    def t_of(self, event: str, **match: Any) -> float:
-        """The runner's clock (the flight's t_s) at the first ``event`` with these fields."""
-        return next(e["t_s"] for e in self.events
-                    if e["event"] == event and all(e.get(k) == v for k, v in match.items()))  # fmt: skip
-
-    def heard_after(self, t_s: float) -> list[str]:
-        """The commands the vehicle heard after the flight's ``t_s``."""
-        t0 = self.runner.log.t0_mono
-        return [c for t, c in self.ap.commands if t - t0 > t_s + 1e-9]
-
-
-def _config(land: bool = True) -> Any:
-    raw = tomllib.loads(mission_config_path("vertical").read_text())
-    raw["flight"].update(start_height_m=START_M, land=land)
-    raw["plan"]["descent_m"] = DESCENT_M
-    return mission_config_from_dict(raw, "vertical test")
-
-
-def fly(tmp_path: Path, script: Callable[[ScriptedAutopilot, MissionRunner], None] | None = None,
-        land: bool = True, **autopilot: Any) -> Flight:  # fmt: skip
-    """One vertical descent (START_M → START_M − DESCENT_M) flown in virtual time; ``script(ap, runner)``
-    sets up what happens."""
-    cfg = _config(land)
-    traj = load_mission_module("vertical").plan(X500, cfg)
-    req = FlyRequest("udpin://0.0.0.0:14540", X500, cfg, traj, "vertical", yes=True, log_root=tmp_path,
-                     print_fn=lambda _: None)  # fmt: skip
-    ap = ScriptedAutopilot(**autopilot)
-    runner = MissionRunner(req, open_link=lambda _tlog, _on_event: ap)
-    if script is not None:
-        script(ap, runner)
-    outcome = run_virtual(runner.run())
-    log_dir = Path(outcome.log_dir)
-    for name in LOG_FILES:
-        assert (log_dir / name).is_file(), name
-    events = [json.loads(x) for x in (log_dir / "events.jsonl").read_text().splitlines()]
-    assert events[-1]["event"] == "end" and events[-1]["outcome"] == outcome.outcome
-    summary = json.loads((log_dir / "summary.json").read_text())
-    assert summary["outcome"] == outcome.outcome and summary["abort_reason"] == outcome.abort_reason
-    return Flight(outcome, ap, runner, events, summary)
-
-
-def in_phase(runner: MissionRunner, phase: str) -> Callable[[], bool]:
-    return lambda: runner.phase == phase and not runner.ladder.active
-
 
 # -- the nominal flight --------------------------------------------------------------------------------
 
@@ -328,7 +262,10 @@ def test_ardupilot_defaults_are_refused_before_arming_with_the_value_to_set(tmp_
 def test_ardupilot_flies_the_descent_in_guided_and_lands(tmp_path):
     f = fly_ap(tmp_path)
     assert f.outcome.outcome == "completed" and f.outcome.descent_time_s is not None
-    assert [c for _, c in f.ap.commands] == ["arm", "set_takeoff_altitude", "takeoff", "start_offboard", "land"]
+    # it boots in STABILIZE, a pilot's mode: the flight starts from GUIDED (from the arm on, a pilot's mode is a
+    # takeover)
+    assert [c for _, c in f.ap.commands] == ["set_mode", "arm", "set_takeoff_altitude", "takeoff", "start_offboard",
+                                             "land"]  # fmt: skip
     autopilot = next(e for e in f.events if e["event"] == "autopilot")
     assert autopilot["offboard_mode"] == "GUIDED" and autopilot["hold_mode"] == "BRAKE"
     assert {e["new"] for e in f.events if e["event"] == "mode"} == {"GUIDED", "LAND"}
@@ -378,7 +315,7 @@ def test_ardupilot_link_lost_stays_in_guided_braking_after_guid_timeout(tmp_path
 def test_ardupilot_second_flight_on_the_same_vehicle_arms_from_guided(tmp_path):
     # the campaign flies several times without a reboot: ArduCopter is left disarmed in LAND, and MAVSDK's
     # arm would turn that into BRAKE, where it refuses to arm; the preflight sets GUIDED first
-    cfg = _config()
+    cfg = config()
     traj = load_mission_module("vertical").plan(X500, cfg)
     ap = ScriptedAutopilot(autopilot=ARDUPILOT, params=dict(AP_READY))
     outcomes = []

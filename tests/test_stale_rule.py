@@ -190,7 +190,7 @@ def test_a_150_ms_gap_during_takeoff_is_logged_not_an_abort():
     state, pos = _link(0.0, 4.0, {2.0: 0.6})
     decisions = replay(_limits(), state, pos, lambda t: "takeoff", 4.0)
     assert decisions and all(d.action == g.OBSERVE for _, _, d in decisions)
-    assert "in takeoff: PX4 flies itself" in decisions[0][2].reason
+    assert "in takeoff: the autopilot flies itself" in decisions[0][2].reason
 
 
 def test_a_long_gap_where_px4_flies_itself_starts_the_ladder():
@@ -320,7 +320,7 @@ def test_the_ticker_logs_a_gap_in_takeoff_once_and_flies_on(tmp_path):
     assert not runner.ladder.active and not [e for e in events if e["event"] == "abort"]
     noted = [e for e in events if e["event"] == "stale_while_takeoff"]
     assert len(noted) == 2  # one per gap over 0.25 s; the 150 ms one is below even that
-    assert noted[0]["reason"].endswith("in takeoff: PX4 flies itself")
+    assert noted[0]["reason"].endswith("in takeoff: the autopilot flies itself")
     gaps = {e["phase"]: e["max_gap_ms"] for e in events if e["event"] == "telemetry_gaps"}
     assert gaps["takeoff"] == pytest.approx(400.0, abs=11.0)
 

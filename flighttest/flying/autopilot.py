@@ -30,6 +30,9 @@ class AutopilotRules:
     hold_mode: str  # the abort ladder's hold rung: stops and holds, ignoring the sticks
     land_mode: str
     pilot_modes: frozenset[str]  # a person at the sticks: a takeover, never an unexpected mode
+    # the modes the autopilot brings the vehicle down or home in by itself (its Land, its return, its
+    # failsafes): entered by the autopilot, they are followed, never overridden by a Hold
+    failsafe_modes: frozenset[str]
     # leaving offboard by "offboard stop" reaches the hold mode (PX4); else the ladder asks for it (ArduPilot,
     # whose MAVSDK "offboard stop" would leave it in a pilot's mode)
     hold_by_offboard_stop: bool
@@ -50,12 +53,14 @@ class AutopilotRules:
 
     def describe(self) -> dict[str, object]:
         return {"autopilot": self.name, "offboard_mode": self.offboard_mode, "hold_mode": self.hold_mode,
-                "land_mode": self.land_mode, "pilot_modes": sorted(self.pilot_modes)}  # fmt: skip
+                "land_mode": self.land_mode, "pilot_modes": sorted(self.pilot_modes),
+                "failsafe_modes": sorted(self.failsafe_modes)}  # fmt: skip
 
 
 PX4_RULES = AutopilotRules(
     name=PX4, offboard_mode="OFFBOARD", hold_mode="HOLD", land_mode="LAND",
     pilot_modes=frozenset({"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE"}),
+    failsafe_modes=frozenset({"LAND", "RETURN_TO_LAUNCH"}),
     hold_by_offboard_stop=True, not_armable_modes=frozenset({"OFFBOARD"}), armable_mode="HOLD",
     offboard_loss_failsafe=True,
     health_wait_s=30.0, reads_mode_from_heartbeat=False,
@@ -65,6 +70,7 @@ ARDUPILOT_RULES = AutopilotRules(
     name=ARDUPILOT, offboard_mode="GUIDED", hold_mode="BRAKE", land_mode="LAND",
     pilot_modes=frozenset({"STABILIZE", "ACRO", "ALT_HOLD", "LOITER", "POSHOLD", "DRIFT", "SPORT", "FLOWHOLD",
                            "ZIGZAG"}),
+    failsafe_modes=frozenset({"LAND", "RTL", "SMART_RTL", "AUTO_RTL"}),
     hold_by_offboard_stop=False, not_armable_modes=frozenset({"LAND", "RTL", "AUTO", "BRAKE", "SMART_RTL", "AUTO_RTL"}),
     armable_mode="GUIDED", offboard_loss_failsafe=False,
     health_wait_s=90.0, reads_mode_from_heartbeat=True, takeoff_to_handover=True,

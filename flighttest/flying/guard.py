@@ -20,7 +20,7 @@ from enum import IntEnum
 from flighttest.analysis.fluctuation import LIVE_MIN_SAMPLES, LIVE_MIN_SPAN_FRACTION, fluct_threshold, hover_baseline
 from flighttest.flying.autopilot import PX4_RULES, AutopilotRules
 from flighttest.model.aero import G_MPS2
-from flighttest.model.frames import GuardRegion
+from flighttest.model.frames import GuardRegion, disk_tilt_sin, worst_blade_velocity_mps
 
 # Verdicts (guard.csv ``verdict``)
 OK = "ok"
@@ -60,7 +60,13 @@ OBSERVE = "observe"
 #   any stall seen (5.8× the worst); at PX4's takeoff climb (MPC_TKO_SPEED 1.5 m/s) 1.5 m
 #   unobserved, which the takeoff height leaves room for;
 # - ``stale_periods`` (telemetry periods) is the older spelling of the offboard limit: when given it
-#   sets ``stale_after_s`` = ``stale_periods`` × the telemetry period (``GuardLimits``: the one place).
+#   sets ``stale_after_s`` = ``stale_periods`` × the telemetry period (``GuardLimits``: the one place);
+# - a velocity is judged only with an attitude at most ``stale_after_s`` older (a level attitude kept from
+#   before a flare understates ``w``); position-velocity or attitude missing for VELOCITY_STALE_FACTOR ×
+#   the limit is stale although the other stream flows;
+# - a stream that keeps arriving but late is stale too: its lateness is the attitude's arrival time less
+#   its vehicle timestamp, above the least lateness of the last LATENCY_WINDOW_S (a slow simulator's
+#   clock drifts against ours by far less than the limit over that window).
 STALE_AFTER_S = 0.25
 AUTOPILOT_STALE_S = 1.0
 # the runner's phases (flighttest.flying.runner set_phase) in which flighttest streams offboard setpoints …
@@ -133,6 +139,9 @@ class GuardSample:
     an_cmd_mps2: float = 0.0
     ae_cmd_mps2: float = 0.0
     ad_cmd_mps2: float = 0.0
+    # how far the wind may be off (the guard judges the worst air within it: flighttest.flying.wind)
+    wind_radius_mps: float = 0.0
+    att_age_s: float = 0.0  # the attitude paired with this velocity is this old
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,6 +234,7 @@ class FluctuationDetector:
 
 
 VELOCITY_STALE_FACTOR = 2.0
+LATENCY_WINDOW_S = 2.0
 
 
 class Guard:
@@ -234,6 +244,9 @@ class Guard:
         self.limits = limits
         self.last_sample_t: float | None = None  # newest state sample of any stream (staleness)
         self.last_velocity_t: float | None = None  # newest position-velocity sample
+        self.last_attitude_t: float | None = None  # newest attitude sample
+        self._latency: deque[tuple[float, float]] = deque()  # (arrival, arrival − vehicle time): increasing
+        self.lateness_s = 0.0  # the latest attitude sample's lateness (module comment "Stale telemetry")
         self.max_gap_s = 0.0  # longest gap between state samples so far (the runner logs and resets it)
         self._suspect_run = 0
         self._trend: deque[tuple[float, float, float]] = deque()
@@ -313,6 +326,20 @@ class Guard:
                 self.max_gap_s = t_s - last
             self.last_sample_t = t_s
 
+    def note_attitude(self, t_s: float, t_vehicle_s: float | None = None) -> None:
+        """An attitude sample arrived at ``t_s``, stamped ``t_vehicle_s`` by the vehicle (None: unstamped)."""
+        self.note_state_sample(t_s)
+        self.last_attitude_t = t_s
+        if t_vehicle_s is None or not math.isfinite(t_vehicle_s):
+            return
+        lat, q = t_s - t_vehicle_s, self._latency
+        while q and q[-1][1] >= lat:  # a monotonic queue: its front is the window's least latency
+            q.pop()
+        q.append((t_s, lat))
+        while q[0][0] < t_s - LATENCY_WINDOW_S:
+            q.popleft()
+        self.lateness_s = lat - q[0][1]
+
     def _extrapolate(self, t_s: float, w: float, u: float) -> tuple[float, float]:
         """``(w, u)`` ``horizon_s`` ahead along the slope from the oldest sample within the trend window
         (a real estimate's velocity noise is slow — PX4: correlated over 1.5 s — so a 0.1 s slope is
@@ -338,19 +365,24 @@ class Guard:
         if not all(math.isfinite(v) for v in values):
             self._suspect_run = 0
             return Decision(s.t_s, NON_FINITE, act, "non-finite telemetry", sample=s)
+        if not math.isfinite(s.att_age_s) or s.att_age_s > lim.stale_after_s:
+            self._suspect_run = 0
+            return Decision(s.t_s, STALE, act, f"attitude {s.att_age_s * 1000:.0f} ms old: velocity not judged "
+                            f"with it (> {lim.stale_after_s * 1000:.0f} ms)", sample=s)  # fmt: skip
         qn = math.sqrt(s.qw * s.qw + s.qx * s.qx + s.qy * s.qy + s.qz * s.qz)
         if abs(qn - 1.0) > 0.05:
             return Decision(s.t_s, NON_FINITE, act, f"attitude quaternion norm {qn:.3f} ≠ 1", sample=s)
-        _, w, u, margin = lim.region.check(
-            s.vn_mps, s.ve_mps, s.vd_mps, s.qw / qn, s.qx / qn, s.qy / qn, s.qz / qn, s.wn_mps, s.we_mps, s.wd_mps
-        )
+        qw, qx, qy, qz = s.qw / qn, s.qx / qn, s.qy / qn, s.qz / qn
+        _, w, u, _ = lim.region.check(s.vn_mps, s.ve_mps, s.vd_mps, qw, qx, qy, qz, s.wn_mps, s.we_mps, s.wd_mps)
         # a horizon ahead, from the vehicle's own response: (w, u) extrapolated along their measured trend
         # over the last trend_window_s. Not from the command: a real autopilot's tilt and descent trail a
-        # demanding plan by tenths of a second (../shared/px4_sih: 3° of a commanded 27° 0.2 s in), so
-        # the command's tilt promises margin the vehicle has not got.
-        w, u, margin = float(w), float(u), float(margin)
+        # demanding plan by tenths of a second (bench/RESULTS.md, "Flying the plan PX4 flies").
+        w, u = float(w), float(u)
         wp, up = self._extrapolate(s.t_s, w, u)
-        pmargin = float(lim.region.margin(wp, up))
+        # both judged at the worst air the wind's uncertainty allows; w and u are logged as estimated
+        tilt = float(disk_tilt_sin(qw, qx, qy, qz))
+        margin = float(lim.region.margin(*worst_blade_velocity_mps(w, u, tilt, s.wind_radius_mps)))
+        pmargin = float(lim.region.margin(*worst_blade_velocity_mps(wp, up, tilt, s.wind_radius_mps)))
 
         def dec(verdict: str, action: str, reason: str) -> Decision:
             return Decision(s.t_s, verdict, action, reason, w, u, margin, pmargin, s)
@@ -395,17 +427,24 @@ class Guard:
         lim = self.limits
         age = now_s - self.last_sample_t
         v_age = now_s - self.last_velocity_t if self.last_velocity_t is not None else -math.inf
+        a_age = now_s - self.last_attitude_t if self.last_attitude_t is not None else -math.inf
+        # the age that counts: the silence itself, or the lateness of what arrives
+        age = max(age, self.lateness_s)
         if phase in AUTOPILOT_PHASES:
-            acts = age > lim.autopilot_stale_s or v_age > VELOCITY_STALE_FACTOR * lim.autopilot_stale_s
+            acts = age > lim.autopilot_stale_s or max(v_age, a_age) > VELOCITY_STALE_FACTOR * lim.autopilot_stale_s
             action, after = (ABORT, lim.autopilot_stale_s) if acts else (OBSERVE, lim.stale_after_s)
-            where = f" in {phase}: PX4 flies itself"
+            where = f" in {phase}: the autopilot flies itself"
         else:
             action, after, where = (ABORT if self.armed else NONE), lim.stale_after_s, ""
-        if age > after:
+        one_ms = VELOCITY_STALE_FACTOR * after * 1000
+        if self.lateness_s > after and now_s - self.last_sample_t <= after:
+            why = f"telemetry arrives {self.lateness_s * 1000:.0f} ms late (> {after * 1000:.0f} ms)"
+        elif age > after:
             why = f"no telemetry for {age * 1000:.0f} ms (> {after * 1000:.0f} ms)"
         elif v_age > VELOCITY_STALE_FACTOR * after:
-            v_after_ms = VELOCITY_STALE_FACTOR * after * 1000
-            why = f"no position-velocity telemetry for {v_age * 1000:.0f} ms (> {v_after_ms:.0f} ms)"
+            why = f"no position-velocity telemetry for {v_age * 1000:.0f} ms (> {one_ms:.0f} ms)"
+        elif a_age > VELOCITY_STALE_FACTOR * after:
+            why = f"no attitude telemetry for {a_age * 1000:.0f} ms (> {one_ms:.0f} ms)"
         else:
             return None
         return Decision(now_s, STALE, action, why + where)
@@ -482,6 +521,10 @@ class AbortLadder:
     _hold_seen_t: float | None = None
     _last_land_t: float = -math.inf
     _land_watch: str = ""  # in Land: "" (telemetry fine), "telemetry stale" or "link lost"
+    # in Land: the autopilot brings the vehicle down (or home) by itself and the ladder only watches; a mode
+    # seen outside its own ones (fresh telemetry) for land_retry_s ends the watching: Land is sent then
+    following: bool = False
+    _strange_mode_since: float | None = None
     history: list[tuple[float, str, str]] = field(default_factory=list)
 
     @property
@@ -498,6 +541,16 @@ class AbortLadder:
         if self.rung >= first:
             return None
         return self._enter(t_s, first, reason)
+
+    def follow(self, t_s: float, reason: str) -> None:
+        """The autopilot took the vehicle into one of its own failsafe modes: the ladder's Land rung, sending
+        nothing while it stays in them."""
+        if not self.reason:
+            self.reason = reason
+        if self.rung < Rung.LAND:
+            self._enter(t_s, Rung.LAND, reason)
+        self.following = True
+        self._strange_mode_since = None
 
     def escalate(self, t_s: float, why: str) -> str | None:
         """Skip to the next rung now (a second Ctrl-C, a failed command)."""
@@ -520,7 +573,7 @@ class AbortLadder:
             return CMD_HOLD
         if rung == Rung.LAND:
             self._last_land_t = t_s
-            return CMD_LAND
+            return None if self.following else CMD_LAND
         return None
 
     def finish(self, t_s: float, why: str) -> None:
@@ -543,6 +596,10 @@ class AbortLadder:
         if not ob.link_ok and ob.heard_age_s > tm.link_give_up_s:
             why = f"link lost and nothing heard for {ob.heard_age_s:.1f} s (> {tm.link_give_up_s:g} s)"
             return self._enter(t, Rung.DONE, f"{why}: the vehicle's own failsafe is in charge")
+        # the autopilot chose to land or return by itself: follow it, send nothing
+        if ob.mode in self.rules.failsafe_modes and not self.following and self.rung < Rung.LAND:
+            self.follow(t, f"autopilot in {ob.mode}: following it")
+            return None
         if self.rung == Rung.RECOVER:
             arrested = ob.telemetry_fresh and ob.region_ok and ob.vd_mps <= tm.arrested_vd_mps
             if arrested:
@@ -562,9 +619,6 @@ class AbortLadder:
                     return self._enter(t, Rung.DONE, "holding (--no-land)")
                 if t - self._hold_seen_t >= tm.hold_dwell_s:
                     return self._enter(t, Rung.LAND, "hold dwell over")
-            elif ob.mode == self.rules.land_mode:  # the autopilot chose to land itself: follow it, send nothing
-                self._enter(t, Rung.LAND, "autopilot landing")
-                return None
             elif t - self.entered_t >= tm.hold_confirm_s:
                 why = f"Hold not confirmed within {tm.hold_confirm_s:g} s (mode {ob.mode or 'unknown'})"
                 if not tm.land:
@@ -582,6 +636,17 @@ class AbortLadder:
         if ob.landed:
             return self._enter(t, Rung.DONE, "landed")
         watch = "link lost" if not ob.link_ok else "telemetry stale" if not ob.telemetry_fresh else ""
+        if self.following:
+            if watch or ob.mode in self.rules.failsafe_modes:
+                self._strange_mode_since = None
+                return None  # what the autopilot flies by itself is not overridden, seen or not
+            self._strange_mode_since = t if self._strange_mode_since is None else self._strange_mode_since
+            if t - self._strange_mode_since < tm.land_retry_s:
+                return None
+            self.following = False
+            self._last_land_t = t
+            self.note(t, f"the autopilot left its own modes for {ob.mode or 'unknown'}: sending Land")
+            return CMD_LAND
         if watch != self._land_watch:
             was, self._land_watch = self._land_watch, watch
             if not watch:

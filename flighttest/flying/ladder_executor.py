@@ -38,6 +38,7 @@ class LadderHost(Protocol):
 
     def now(self) -> float: ...
     def event(self, name: str, **fields: Any) -> None: ...
+    def on_ground(self) -> str | None: ...  # why the vehicle is on the ground, from evidence (flying.ground)
 
 
 class LadderExecutor:
@@ -78,10 +79,11 @@ class LadderExecutor:
                 host.event("ladder", rung=rung, why=why, decided_t_s=round(t - self.t0_s(), 3))
             logged = len(self.ladder.history)
 
-        if not st.armed and not st.in_air:
-            self.ladder.finish(host.now(), "vehicle on the ground")
+        ground = None if self.ladder.done else host.on_ground()
+        if ground is not None:
+            self.ladder.finish(host.now(), f"vehicle on the ground ({ground})")
         while not self.ladder.done:
-            while not self._queue.empty():
+            while not self._queue.empty() and not self.ladder.done:
                 await self.execute(self._queue.get_nowait())
             log_decisions()
             now = host.now()
@@ -89,9 +91,10 @@ class LadderExecutor:
             heard = max((t for t in (st.t_posvel, st.t_att, st.t_imu) if t is not None), default=t_start)
             d = host.last_decision
             ob = gd.LadderObservation(
-                t_s=now, vd_mps=st.vd_mps, region_ok=d is None or not (d.margin_mps < 0),
+                # the region is ok only on a judged margin: none yet, or NaN (stale, non-finite), is unknown
+                t_s=now, vd_mps=st.vd_mps, region_ok=d is not None and d.margin_mps >= 0.0,
                 telemetry_fresh=fresh, mode=st.flight_mode,
-                landed=not st.armed, link_ok=st.connected,  # done when disarmed, not at touchdown
+                landed=host.on_ground() is not None, link_ok=st.connected,
                 heard_age_s=now - max(heard, t_start),
             )  # fmt: skip
             cmd = self.ladder.step(ob)
@@ -109,6 +112,10 @@ class LadderExecutor:
     async def execute(self, cmd: str) -> None:
         host, st = self.host, self.link.state
         rules = host.rules
+        if st.flight_mode in rules.pilot_modes:  # nothing is ever sent to take a vehicle from the sticks
+            host.event("ladder_command_skipped", command=cmd, why=f"pilot in control ({st.flight_mode})")
+            self.ladder.finish(host.now(), f"pilot took over ({st.flight_mode}): sending nothing more")
+            return
         host.event("ladder_command", command=cmd)
         if cmd == gd.CMD_RECOVER:
             if st.flight_mode != rules.offboard_mode or host.phase not in OFFBOARD_FLOW:

@@ -220,14 +220,20 @@ class TelemetryState:
     t_posvel: float | None = None
     q: tuple[float, float, float, float] = (math.nan,) * 4
     t_att: float | None = None
+    t_att_vehicle_s: float | None = None  # the vehicle's own time of that attitude sample (its boot clock)
     rates_rps: tuple[float, float, float] = (math.nan,) * 3
     accel_frd_mps2: tuple[float, float, float] = (math.nan,) * 3
     t_imu: float | None = None
     wind_ned_mps: tuple[float, float, float] | None = None
+    wind_accuracy_mps: float = math.nan  # the report's own horizontal accuracy (1 σ), NaN: not given
     t_wind: float | None = None
     flight_mode: str = "UNKNOWN"
     armed: bool = False
+    t_armed: float | None = None  # arrival of the latest armed report (MAVSDK: every heartbeat, 1 Hz)
+    armed_since_t: float | None = None  # arrival of the first report of the current armed value
     landed_state: str = "UNKNOWN"
+    t_landed: float | None = None  # arrival of the latest landed-state report (EXTENDED_SYS_STATE)
+    landed_since_t: float | None = None  # arrival of the first report of the current landed state
     in_air: bool = False
     battery_percent: float = math.nan
     battery_v: float = math.nan
@@ -241,6 +247,16 @@ class TelemetryState:
     def alt_m(self) -> float:
         """Height above home (the local frame's origin), m."""
         return -self.d_m
+
+    def report_armed(self, armed: bool, t: float) -> None:
+        if armed != self.armed or self.armed_since_t is None:
+            self.armed_since_t = t
+        self.armed, self.t_armed = armed, t
+
+    def report_landed(self, landed_state: str, t: float) -> None:
+        if landed_state != self.landed_state or self.landed_since_t is None:
+            self.landed_since_t = t
+        self.landed_state, self.t_landed = landed_state, t
 
     def count(self, stream: str, t: float) -> None:
         self.counts[stream] = self.counts.get(stream, 0) + 1
@@ -463,7 +479,8 @@ class VehicleLink:
         self.system = None
         if self._recorder is not None:
             self._recorder.stop()
-            self._on_event("tlog", {"messages": self._recorder.messages, "path": str(self._recorder.path)})
+            self._on_event("tlog", {"messages": self._recorder.messages, "path": str(self._recorder.path),
+                                    "write_errors": self._recorder.write_errors})  # fmt: skip
             self._recorder = None
 
     # -- blocking calls ----------------------------------------------------------------------------
@@ -550,6 +567,7 @@ class VehicleLink:
             t = time.monotonic()
             st.q = (q.w, q.x, q.y, q.z)
             st.t_att = t
+            st.t_att_vehicle_s = q.timestamp_us * 1e-6 if q.timestamp_us else None
             st.count("attitude", t)
             for cb in self.on_attitude:
                 cb(t)
@@ -569,6 +587,7 @@ class VehicleLink:
             vals = (w.wind_x_ned_m_s, w.wind_y_ned_m_s, w.wind_z_ned_m_s)
             if all(math.isfinite(x) for x in vals):
                 st.wind_ned_mps, st.t_wind = vals, t
+                st.wind_accuracy_mps = w.horizontal_wind_speed_accuracy_m_s
 
         def set_mode(name: str) -> None:
             old, st.flight_mode = st.flight_mode, name
@@ -589,10 +608,10 @@ class VehicleLink:
                 set_mode(arducopter_mode_name(custom_mode))
 
         def armed(a) -> None:
-            st.armed = bool(a)
+            st.report_armed(bool(a), time.monotonic())
 
         def landed(ls) -> None:
-            st.landed_state = ls.name
+            st.report_landed(ls.name, time.monotonic())
 
         def in_air(a) -> None:
             st.in_air = bool(a)

@@ -5,8 +5,11 @@ moment it is written (a block buffer would hand the OS half a line whenever it f
 process would leave that half). A process killed mid-flight, even with SIGKILL, so loses nothing it
 wrote, every line in the files is complete, and the analysis tools read what is there.
 ``flush()`` is kept for callers that want to be explicit; ``FLUSH_EVERY_S`` bounds it anyway.
-``summary.json`` is written last; its
-absence marks a flight that did not end cleanly.
+``summary.json`` is written last; its absence marks a flight that did not end cleanly.
+
+No write ever raises during a flight: the guard, the ladder and the commands run on the same loop as
+the writes, and a full disk must not stop them. A failed write (``OSError``) is counted; the first
+error is kept, and ``summary.json`` says the log is incomplete (``log_complete``, ``log_write_errors``).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ SETPOINT_COLUMNS = (
 GUARD_COLUMNS = (
     "t_s", "unix_s", "verdict", "w_mps", "u_mps", "margin_mps", "predicted_margin_mps", "action",
     "reason", "vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "wn_mps", "we_mps", "wd_mps", "alt_m",
+    "wind_sd_mps", "wind_source",
 )  # fmt: skip
 
 
@@ -56,6 +60,33 @@ def write_json_atomic(path: Path, data: Any) -> None:
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_text(json.dumps(json_safe(data), indent=2) + "\n", encoding="utf-8")
     tmp.replace(path)
+
+
+class _Sink:
+    """One open log file whose writes never raise: a failure is counted by the writer it reports to."""
+
+    def __init__(self, f: IO[str], failed: Callable[[OSError], None]) -> None:
+        self.f = f
+        self._failed = failed
+
+    def write(self, text: str) -> None:
+        try:
+            self.f.write(text)
+        except OSError as exc:
+            self._failed(exc)
+
+    def flush(self) -> None:
+        try:
+            if not self.f.closed:
+                self.f.flush()
+        except OSError as exc:
+            self._failed(exc)
+
+    def close(self) -> None:
+        try:
+            self.f.close()
+        except OSError as exc:
+            self._failed(exc)
 
 
 class FlightLogWriter:
@@ -82,11 +113,13 @@ class FlightLogWriter:
 
                 raise FlighttestError(f"cannot create log folder {path} ({exc.strerror})") from None
         self.dir = path
+        self.write_errors = 0
+        self.first_error: str | None = None
         # ``clock`` is the runner's (its event loop's; virtual in the runner's tests): t0 on it, and the
         # wall time of t0 through it
         self.t0_mono = clock() if t0_mono is None else t0_mono
         self.unix0 = time.time() - (clock() - self.t0_mono)
-        self._files: list[IO[str]] = []
+        self._files: list[_Sink] = []
         self._setpoints = self._open_csv("setpoints.csv", SETPOINT_COLUMNS)
         self._guard = self._open_csv("guard.csv", GUARD_COLUMNS)
         self._events = self._open("events.jsonl")
@@ -98,10 +131,25 @@ class FlightLogWriter:
     def tlog_path(self) -> Path:
         return self.dir / "flight.tlog"
 
-    def _open(self, name: str) -> IO[str]:
+    @property
+    def complete(self) -> bool:
+        return self.write_errors == 0
+
+    def write_failed(self, exc: OSError) -> None:
+        self.write_errors += 1
+        if self.first_error is None:
+            self.first_error = f"{exc.strerror or exc}" + (f": {Path(exc.filename).name}" if exc.filename else "")
+
+    def log_state(self) -> dict[str, Any]:
+        """What ``summary.json`` says of the log itself."""
+        return {"log_complete": self.complete, "log_write_errors": self.write_errors,
+                "log_first_error": self.first_error}  # fmt: skip
+
+    def _open(self, name: str) -> _Sink:
         f = open(self.dir / name, "w", encoding="utf-8", newline="", buffering=1)  # noqa: SIM115 (kept open)
-        self._files.append(f)
-        return f
+        sink = _Sink(f, self.write_failed)
+        self._files.append(sink)
+        return sink
 
     def _open_csv(self, name: str, columns: tuple[str, ...]):
         f = self._open(name)
@@ -123,8 +171,9 @@ class FlightLogWriter:
         self._setpoints.writerow([csv_number(float(x)) for x in values] + [phase])
         self.flush_if_due()
 
-    def guard(self, decision) -> None:
-        """One guard decision with the inputs it was made from (``flighttest.flying.guard.Decision``)."""
+    def guard(self, decision, wind=None) -> None:
+        """One guard decision with the inputs it was made from (``flighttest.flying.guard.Decision``) and the
+        wind estimate it judged with (``flighttest.flying.wind.WindEstimate``; None: none)."""
         if self.closed:
             return
         t, u = self.times(decision.t_s)
@@ -135,7 +184,8 @@ class FlightLogWriter:
             else (math.nan,) * 11
         )
         row = [t, u, decision.verdict, decision.w_mps, decision.u_mps, decision.margin_mps,
-               decision.predicted_margin_mps, decision.action, decision.reason, *inputs]  # fmt: skip
+               decision.predicted_margin_mps, decision.action, decision.reason, *inputs,
+               wind.sd_mps if wind is not None else math.nan, wind.source if wind is not None else ""]  # fmt: skip
         self._guard.writerow([csv_number(float(x)) if isinstance(x, float | int) else x for x in row])
         self.flush_if_due()
 
@@ -144,7 +194,12 @@ class FlightLogWriter:
             return
         t, u = self.times(t_mono)
         rec = {"t_s": round(t, 4), "unix_s": round(u, 4), "event": event, **fields}
-        self._events.write(json.dumps(json_safe(rec), default=str) + "\n")
+        try:
+            line = json.dumps(json_safe(rec), default=str) + "\n"
+        except (TypeError, ValueError) as exc:  # a field that cannot be written must not stop the caller
+            bare = {"t_s": rec["t_s"], "unix_s": rec["unix_s"], "event": event, "unwritable": repr(exc)}
+            line = json.dumps(bare) + "\n"
+        self._events.write(line)
         # events are rare and matter most when something goes wrong: flush them at once
         self.flush()
 
@@ -181,8 +236,7 @@ class FlightLogWriter:
 
     def flush(self) -> None:
         for f in self._files:
-            if not f.closed:
-                f.flush()
+            f.flush()
         self._last_flush = time.monotonic()
 
     def close(self) -> None:

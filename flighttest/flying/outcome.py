@@ -68,7 +68,8 @@ class FlyRequest:
     sysid: int | None = None
     yes: bool = False
     dry_run: bool = False
-    wind_ned_mps: tuple[float, float, float] | None = None
+    wind_ned_mps: tuple[float, float, float] | None = None  # the operator's (a prior: flighttest.flying.wind)
+    wind_sd_mps: float | None = None  # its uncertainty, 1 σ; None: flighttest.flying.wind.PRIOR_SD_MPS
     log_root: Path = Path("logs")
     show_panel: bool = False
     confirm: Callable[[PreflightResult], bool] | None = None  # go/no-go prompt

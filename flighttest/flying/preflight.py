@@ -12,6 +12,7 @@ import numpy as np
 from rich.table import Table
 
 from flighttest.errors import FlighttestError
+from flighttest.flying.autopilot import AutopilotRules
 from flighttest.flying.guard import predicted_blade_velocity_mps
 from flighttest.flying.link import TelemetryState
 from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M
@@ -27,7 +28,12 @@ OBL_ACTIONS = {0: "Position", 1: "Altitude", 2: "Manual", 3: "Return", 4: "Land"
 OBL_UNSAFE = {2, 6, 7}  # manual without a pilot, terminate and disarm drop the vehicle
 RC_OVERRIDE_OFFBOARD_BIT = 2  # COM_RC_OVERRIDE bit 1: sticks take over from offboard
 ABORT_PARAMS = {"COM_OF_LOSS_T": "float", "COM_OBL_RC_ACT": "int", "COM_RC_OVERRIDE": "int",
-                "MPC_Z_VEL_MAX_DN": "float"}  # fmt: skip
+                "MPC_Z_VEL_MAX_DN": "float", "MPC_LAND_SPEED": "float", "MPC_Z_V_AUTO_DN": "float",
+                "MPC_LAND_ALT1": "float", "MPC_LAND_ALT2": "float"}  # fmt: skip
+GROUND_HEIGHT_OK_M = 0.5  # the estimate's height on the ground: within this of home is ordinary drift
+GROUND_HEIGHT_MAX_M = 3.0  # beyond this the estimate is not fit to fly from (reset it, or set home)
+LOG_BYTES_PER_S_PER_HZ = 1000.0  # a flight's log folder: ~45 kB/s at 50 Hz telemetry (../shared reference flights)
+LOG_DISK_FACTOR = 2.0  # the free disk the preflight asks for, in estimated logs
 
 
 @dataclass(frozen=True)
@@ -240,7 +246,55 @@ def vehicle_checks(
     return out
 
 
-def param_checks(params: dict[str, float | int | None], descent_max_mps: float, w_allow_mps: float) -> list[Check]:
+def mode_check(mode: str, rules: AutopilotRules) -> Check:
+    """The mode the vehicle will arm in: from the arm on, a pilot's mode is a takeover and flighttest sends
+    nothing more, so a flight never starts in one (nor in a mode the autopilot will not arm in)."""
+    why = ", a pilot's mode" if mode in rules.pilot_modes else ""
+    why = why or (", not armable" if mode in rules.not_armable_modes else "")
+    return Check("mode before arming", FAIL if why else PASS, f"{mode}{why}",
+                 f"not a pilot's mode, armable: switch it to {rules.armable_mode}")  # fmt: skip
+
+
+def ground_height_check(alt_m: float) -> Check:
+    """The estimate's height on the ground: every height of the flight (start, floor) counts from it."""
+    need = f"|height| ≤ {GROUND_HEIGHT_MAX_M:g} m; heights, the start and the floor count from it"
+    if not math.isfinite(alt_m):
+        return Check("height on the ground", FAIL, "not reported", need)
+    status = PASS if abs(alt_m) <= GROUND_HEIGHT_OK_M else WARN if abs(alt_m) <= GROUND_HEIGHT_MAX_M else FAIL
+    return Check("height on the ground", status, f"the estimate reads {alt_m:+.2f} m (offset from home)", need)
+
+
+def disk_check(folder, flight_s: float, telemetry_hz: float) -> Check:
+    """Free disk for this flight's log: a full disk mid-flight leaves it incomplete."""
+    import shutil
+
+    need_b = LOG_DISK_FACTOR * LOG_BYTES_PER_S_PER_HZ * telemetry_hz * max(flight_s, 0.0)
+    try:
+        free_b = shutil.disk_usage(folder).free
+    except OSError as exc:
+        return Check("free disk for the log", FAIL, f"unknown ({exc.strerror or exc})", f"≥ {need_b / 1e6:.0f} MB")
+    return Check("free disk for the log", PASS if free_b >= need_b else FAIL, f"{free_b / 1e6:.0f} MB free",
+                 f"≥ {need_b / 1e6:.0f} MB ({LOG_DISK_FACTOR:g}× the log of a {flight_s:.0f} s flight)")  # fmt: skip
+
+
+def px4_land_speed_mps(params: dict[str, float | int | None], height_m: float) -> float | None:
+    """The descent speed of PX4's Land at ``height_m``: MPC_LAND_SPEED below MPC_LAND_ALT2, MPC_Z_V_AUTO_DN
+    above MPC_LAND_ALT1, linear between (FlightTaskAuto's speed_down); None without the parameters."""
+    names = ("MPC_LAND_SPEED", "MPC_Z_V_AUTO_DN", "MPC_LAND_ALT1", "MPC_LAND_ALT2")
+    if any(params.get(n) is None for n in names):
+        return None
+    slow, fast, alt1, alt2 = (float(params[n]) for n in names)
+    if height_m <= alt2 or alt1 <= alt2:
+        return slow
+    if height_m >= alt1:
+        return fast
+    return slow + (height_m - alt2) / (alt1 - alt2) * (fast - slow)
+
+
+def param_checks(params: dict[str, float | int | None], descent_max_mps: float, w_allow_mps: float,
+                 height_max_m: float = 0.0) -> list[Check]:  # fmt: skip
+    """PX4's parameters that decide what happens when offboard ends, and the Land the abort ladder flies
+    from the flight's highest point (``height_max_m``)."""
     out = []
     t = params.get("COM_OF_LOSS_T")
     if t is None:
@@ -272,9 +326,17 @@ def param_checks(params: dict[str, float | int | None], descent_max_mps: float, 
             "MPC_Z_VEL_MAX_DN", PASS if ok else FAIL, f"{v:g} m/s",
             f"≥ planned descent {descent_max_mps:.2f} m/s (PX4 clips offboard descents to it)",
         ))  # fmt: skip
-        if v > w_allow_mps:
-            out.append(Check("PX4 descents after an abort", WARN, f"MPC_Z_VEL_MAX_DN {v:g} m/s",
-                             f"Hold/Return descents stay below w_allow {w_allow_mps:.2f} m/s"))  # fmt: skip
+    land = px4_land_speed_mps(params, height_max_m)
+    need = f"≤ w_allow {w_allow_mps:.2f} m/s: the ladder's Land stays out of the vortex ring"
+    if land is None:
+        out.append(Check("PX4 Land after an abort", WARN, "MPC_LAND_* / MPC_Z_V_AUTO_DN not reported", need))
+    else:
+        ok = land <= w_allow_mps + 1e-6
+        if not ok:
+            need += (f": Land descends faster above MPC_LAND_ALT2 {float(params['MPC_LAND_ALT2']):g} m; raise "
+                     f"MPC_LAND_ALT1/ALT2 above {height_max_m:.1f} m or lower MPC_Z_V_AUTO_DN")  # fmt: skip
+        value = f"{land:.2f} m/s from {height_max_m:.1f} m (MPC_LAND_SPEED {float(params['MPC_LAND_SPEED']):g})"
+        out.append(Check("PX4 Land after an abort", PASS if ok else WARN, value, need))
     return out
 
 

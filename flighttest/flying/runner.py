@@ -22,7 +22,7 @@ import signal
 import sys
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ from flighttest.errors import FlighttestError
 from flighttest.flying import guard as gd
 from flighttest.flying.autopilot import ARDUPILOT, PX4_RULES, AutopilotRules
 from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopilot, z_position_gain_per_s
+from flighttest.flying.ground import GroundEvidence
 from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, LadderExecutor
 from flighttest.flying.link import GCS_SYSID, Link, VehicleLink
 from flighttest.flying.log_writer import FlightLogWriter
@@ -41,6 +42,9 @@ from flighttest.flying.preflight import (
     ARDUPILOT_PARAMS,
     PreflightResult,
     ardupilot_param_checks,
+    disk_check,
+    ground_height_check,
+    mode_check,
     param_checks,
     trajectory_checks,
     trajectory_stats,
@@ -49,6 +53,7 @@ from flighttest.flying.preflight import (
 from flighttest.flying.settling import SettleCheck
 from flighttest.flying.streamer import Setpoint, SetpointStreamer
 from flighttest.flying.watch import FlightWatch
+from flighttest.flying.wind import PRIOR_SD_MPS, WindEstimate, WindSources
 from flighttest.inputs import MAX_DURATION_S
 from flighttest.model.trajectory import Trajectory
 
@@ -56,6 +61,7 @@ from flighttest.model.trajectory import Trajectory
 __all__ = ["LADDER_TIMEOUT_S", "LINK_GIVE_UP_S", "FlightOutcome", "FlyRequest", "MissionRunner", "final_mode", "fly"]
 CLIMB_RATE_MPS = 1.0
 HANDOVER_ALT_M = 2.0  # the autopilot's takeoff hands over to flighttest's offboard climb from this height
+HEARTBEAT_WAIT_S = 2.5  # two and a half heartbeat periods: one lost heartbeat is not a lost link
 HEALTH_PROGRESS_S = 10.0  # while waiting for the vehicle's health, a progress line this often
 # settled: within this of the hover point, this slow (PX4's estimate wanders 0.3-0.8 m and its velocity
 # is off by 0.1-0.2 m/s: ../shared/px4_sih; tighter and a real vehicle never settles)
@@ -123,7 +129,13 @@ class MissionRunner:
         self.guard.armed = False
         self.guard.fluct_active = False  # judged only while streaming, against this flight's hover
         self.watch = FlightWatch(self.guard, self)
-        self.watch.wind_default_ned_mps = req.wind_ned_mps or (0.0, 0.0, 0.0)
+        prior = None
+        if req.wind_ned_mps is not None:
+            sd = PRIOR_SD_MPS if req.wind_sd_mps is None else req.wind_sd_mps
+            prior = WindEstimate(tuple(float(x) for x in req.wind_ned_mps), sd, "operator")
+        self.wind = WindSources(prior)
+        self.ground = GroundEvidence()  # the arm and takeoff commands: "on the ground" needs evidence after them
+        self.ground_alt_m = 0.0  # the estimate's height of the ground, as seen at arming
         self.ladder_run = LadderExecutor(self.ladder, self.cfg.abort, self.fl.rate_hz, self.limits.stale_after_s,
                                          self, lambda: self.log.t0_mono)  # fmt: skip
         self.pauses = FlightPauses(self.event)
@@ -167,12 +179,36 @@ class MissionRunner:
         first_time = not self.ladder.active
         cmd = self.ladder.trigger(self.now(), reason, first)
         if first_time:
-            self.abort_verdict = verdict
-            self.guard.armed = False  # decisions keep being logged; the ladder is in charge now
-            self.event("abort", reason=reason, rung=self.ladder.rung.name, phase=self.phase)
+            self._aborted(reason, verdict)
         if cmd:
             self.ladder_run.queue(cmd)
         self.abort_event.set()
+
+    def _aborted(self, reason: str, verdict: str) -> None:
+        self.abort_verdict = verdict
+        self.guard.armed = False  # decisions keep being logged; the ladder is in charge now
+        self.event("abort", reason=reason, rung=self.ladder.rung.name, phase=self.phase)
+
+    def takeover(self, reason: str, mode: str) -> None:
+        """A pilot has the sticks (``mode``): the run ends here and nothing more is sent, queued or not."""
+        if self.ladder.active:
+            return
+        self.ladder.reason = reason
+        self.ladder.finish(self.now(), f"pilot in control ({mode})")
+        self._aborted(reason, "pilot")
+        self.abort_event.set()
+
+    def follow_autopilot(self, reason: str) -> None:
+        """The autopilot lands or returns by itself (a failsafe): the ladder follows it, sending nothing."""
+        if self.ladder.active:
+            return
+        self.ladder.follow(self.now(), reason)
+        self._aborted(reason, "autopilot")
+        self.abort_event.set()
+
+    def on_ground(self) -> str | None:
+        """Why the vehicle is on the ground, from evidence (``flighttest.flying.ground``), or None."""
+        return self.ground.on_ground(self.link.state, self.now()) if self.link is not None else "never connected"
 
     @property
     def last_decision(self) -> gd.Decision | None:
@@ -254,9 +290,23 @@ class MissionRunner:
                 self.log.discard()
                 outcome.log_dir = None
             else:
-                self.log.write_summary(outcome.summary())
-                self.log.close()
+                self._write_summary(outcome)
         return outcome
+
+    def _write_summary(self, outcome: FlightOutcome) -> None:
+        """``summary.json`` last, saying whether every write before it succeeded; a log that could not be
+        completed is said on the console too (the disk may be full: nothing here may raise)."""
+        log = self.log
+        outcome.extra.update(log.log_state())
+        try:
+            log.write_summary(outcome.summary())
+        except OSError as exc:
+            log.write_failed(exc)
+            outcome.extra.update(log.log_state())
+        log.close()
+        if not log.complete:
+            self.req.print_fn(f"the flight log in {log.dir} is incomplete: {log.write_errors} write(s) failed "
+                              f"(first: {log.first_error})")  # fmt: skip
 
     def interrupt(self, name: str = "SIGINT") -> None:
         """What the operator's Ctrl-C (or SIGTERM) does: the first aborts (the ladder from Recover), each
@@ -279,6 +329,8 @@ class MissionRunner:
             extra.update(final_armed=st.armed, final_landed_state=st.landed_state, final_alt_m=st.alt_m,
                          **final_mode(st.flight_mode, st.armed, self.watch.mode_while_armed))  # fmt: skip
         extra["horizontal_error_m"] = self.watch.horizontal_error_m
+        if self.link is not None:
+            extra.update(self.watch.wind().describe())
         if self.ladder.history:
             extra["ladder"] = [{"t_s": round(t - self.log.t0_mono, 3), "rung": r, "why": w}
                                for t, r, w in self.ladder.history]  # fmt: skip
@@ -323,14 +375,29 @@ class MissionRunner:
             with panel if panel is not None else contextlib.nullcontext():
                 return await self._fly()
         finally:
-            self.pauses.restore()
+            await self._shut_down(link)
+
+    async def _shut_down(self, link: Link) -> None:
+        """Every step, whatever the one before it did: the link is always closed (MAVSDK destroyed)."""
+
+        async def background() -> None:
             for t in self._bg:
                 t.cancel()
             await asyncio.gather(*self._bg, return_exceptions=True)
-            await self.ladder_run.close()
+
+        async def watchdog() -> None:
             if self.streamer is not None:
                 self.streamer.stop_watchdog()
-            await link.close()
+
+        async def pauses() -> None:
+            self.pauses.restore()
+
+        for name, step in (("background tasks", background), ("ladder", self.ladder_run.close),
+                           ("setpoint watchdog", watchdog), ("link", link.close), ("collector", pauses)):  # fmt: skip
+            try:
+                await step()
+            except Exception as exc:
+                self.event("shutdown_error", step=name, error=repr(exc))
 
     async def _race(self, task: asyncio.Task):
         """Await ``task`` unless an abort comes first (then cancel it). Re-raises the task's error."""
@@ -404,23 +471,34 @@ class MissionRunner:
             self.req.print_fn(f"waiting for the vehicle to be ready ({missing}): {self.now() - t0:.0f} s "
                               f"of at most {timeout_s:.0f} s")  # fmt: skip
 
+    async def _leave_mode(self, modes: frozenset[str], why: str) -> None:
+        """Disarmed in one of ``modes``: ask for the autopilot's armable mode, and wait a heartbeat or two
+        for the answer to show (a refusal shows as the mode staying; the caller judges that)."""
+        link, rules = self.link, self.rules
+        mode = link.state.flight_mode
+        if link.state.armed or mode not in modes:
+            return
+        self.event("mode_reset", old=mode, new=rules.armable_mode, why=f"disarmed in {mode}: {why}")
+        with contextlib.suppress(Exception):
+            if rules.armable_mode == rules.hold_mode:
+                await link.hold(5.0)
+            else:
+                await link.set_mode(rules.armable_mode, 5.0)
+        await link.wait_for(lambda s: s.flight_mode not in modes, 3.0)
+
     async def _preflight(self) -> PreflightResult:
         self.set_phase(Phase.PREFLIGHT)
         link, req = self.link, self.req
         await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
         rules = self.rules
-        mode = link.state.flight_mode
-        if not link.state.armed and mode in rules.not_armable_modes:
-            # the campaign's next flight on the same vehicle: PX4 stays in Offboard after an offboard flight
-            # lands, ArduCopter in LAND; neither arms from there (autopilot.AutopilotRules.not_armable_modes)
-            self.event("mode_reset", old=mode, new=rules.armable_mode, why=f"disarmed in {mode} is not armable")
-            with contextlib.suppress(Exception):
-                if rules.armable_mode == rules.hold_mode:
-                    await link.hold(5.0)
-                else:
-                    await link.set_mode(rules.armable_mode, 5.0)
+        # the campaign's next flight on the same vehicle: PX4 stays in Offboard after an offboard flight
+        # lands, ArduCopter in LAND; neither arms from there (autopilot.AutopilotRules.not_armable_modes)
+        await self._leave_mode(rules.not_armable_modes, "is not armable")
         if not _ready(link.state, self.now()):
             await self._wait_for_health(rules.health_wait_s)
+        # a pilot's mode before arming (ArduCopter boots in STABILIZE, PX4 may sit in Position): from the arm
+        # on, a pilot's mode means a takeover (flighttest.flying.watch), so the flight starts from another
+        await self._leave_mode(rules.pilot_modes, "is a pilot's mode")
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
         params = {}
         wanted = ARDUPILOT_PARAMS if rules.name == ARDUPILOT else ABORT_PARAMS
@@ -448,15 +526,22 @@ class MissionRunner:
         stats = trajectory_stats(self.traj, self.limits.region, accel)
         ab = self.cfg.abort
         checks = vehicle_checks(link.state, self.now(), self.fl.telemetry_hz, self.fl.min_battery_percent)
+        checks.append(mode_check(link.state.flight_mode, rules))
+        checks.append(ground_height_check(link.state.alt_m))
+        checks.append(disk_check(self.log.dir, self.traj.duration_s + 120.0, self.fl.telemetry_hz))
         if rules.name == ARDUPILOT:
             checks += ardupilot_param_checks(params, stats, req.profile.w_allow_mps, GCS_SYSID, ab.recovery_climb_mps)
         else:
-            checks += param_checks(params, stats.descent_max_mps, req.profile.w_allow_mps)
+            checks += param_checks(params, stats.descent_max_mps, req.profile.w_allow_mps,
+                                   self.fl.start_height_m + stats.rise_max_m)  # fmt: skip
         checks += trajectory_checks(stats, req.profile, self.fl.start_height_m, self.fl.min_alt_m,
                                     self.fl.geofence_radius_m, ab.recovery_lateral_mps * ab.recovery_s,
                                     self.cfg.guard.observe_region)  # fmt: skip
         pre = PreflightResult(checks)
-        self.log.write_preflight({**pre.to_dict(), "params": params, "trajectory": stats.__dict__})
+        try:
+            self.log.write_preflight({**pre.to_dict(), "params": params, "trajectory": stats.__dict__})
+        except OSError as exc:  # before arming: a flight whose log cannot be written does not start
+            raise _Refused(f"cannot write the flight log in {self.log.dir} ({exc.strerror or exc})") from None
         self.event("preflight", ok=pre.ok, failures=[c.name for c in pre.failures])
         return pre
 
@@ -467,24 +552,33 @@ class MissionRunner:
         st = link.state
         H = fl.start_height_m
         self.pauses.hold_off()
+        # every height of the flight counts from where the estimate puts the ground at arming: after a landing
+        # it may sit tenths of a metre off home (the preflight's "height on the ground" says how far)
+        self.ground_alt_m = st.alt_m if math.isfinite(st.alt_m) else 0.0
+        self.event("ground", alt_m=round(self.ground_alt_m, 3))
         self.set_phase(Phase.ARM)
         self.guard.armed = True
-        await link.arm(10.0)
+        await self._ground_command(link.arm(10.0), 10.0)
         self.event("armed")
-        # the takeoff is judged from where the estimate puts the ground now: after a landing it may sit a few
-        # tenths off home (the ArduCopter fake's second flight: 0.3 m below), and the takeoff climbs from there
-        ground_m = st.alt_m if math.isfinite(st.alt_m) and abs(st.alt_m) < 1.0 else 0.0
         self.set_phase(Phase.TAKEOFF)
         with contextlib.suppress(Exception):
             # ArduCopter's takeoff ends where asked and holds there: asked for the start height it is still
             # climbing fast at the handover, and GUIDED's shaping of the climb's first setpoint (where the
             # vehicle is, at rest) overshoots it, then sinks back (its fake, bench/RESULTS.md)
             await link.set_takeoff_altitude(min(H, HANDOVER_ALT_M) if self.rules.takeoff_to_handover else H, 5.0)
-        await link.takeoff(10.0)
+        await self._ground_command(link.takeoff(10.0), 10.0)
         handover_m = min(H, HANDOVER_ALT_M)
+        ground_m = self.ground_alt_m
         ok = await link.wait_for(lambda s: s.alt_m - ground_m >= handover_m - 0.3 and s.in_air, fl.takeoff_timeout_s)
         if not ok:
             raise RuntimeError(f"takeoff did not reach {handover_m:.1f} m within {fl.takeoff_timeout_s:g} s")
+        # a pilot's switch during the takeoff shows with the next heartbeat (1 Hz): one more before offboard
+        # starts, so that flighttest never takes a vehicle from the sticks (flighttest.flying.watch)
+        t_reached = self.now()
+        if not await link.wait_for(lambda s: s.t_armed is not None and s.t_armed > t_reached, HEARTBEAT_WAIT_S):
+            raise RuntimeError(f"no heartbeat within {HEARTBEAT_WAIT_S:g} s at the handover height")
+        if self.ladder.active:
+            return None
         # offboard from here: climb to the exact start point, holding the trajectory's initial yaw
         self.set_phase(Phase.CLIMB)
         yaw0 = float(self.traj.df["yaw_deg"].iloc[0])
@@ -496,7 +590,7 @@ class MissionRunner:
         self.expect_offboard = True
         await link.start_offboard(10.0)
         self.event("offboard", active=True)
-        start = (st.n_m, st.e_m, -H)
+        start = (st.n_m, st.e_m, -(self.ground_alt_m + H))
         d0 = st.d_m
         n_climb = max(int(abs(start[2] - d0) / CLIMB_RATE_MPS * fl.rate_hz), 1)
 
@@ -553,7 +647,7 @@ class MissionRunner:
             self.set_phase(Phase.LAND)
             self.guard.armed = False  # landing below the floor is the point; stale/link still end it
             await link.land(10.0)
-            ok = await link.wait_for(lambda s: not s.armed, max(H, 1.0) / 0.5 + 30.0)
+            ok = await link.wait_for(lambda s: self.on_ground() is not None, max(H, 1.0) / 0.5 + 30.0)
             if not ok:
                 raise RuntimeError("did not land and disarm in time")
             self.set_phase(Phase.LANDED)
@@ -564,6 +658,21 @@ class MissionRunner:
             if not await link.wait_for(lambda s: s.flight_mode == rules.hold_mode, 5.0):
                 raise RuntimeError(f"{rules.hold_mode.title()} not confirmed after the flight (--no-land)")
         return self._outcome(Outcome.COMPLETED, None)
+
+    async def _ground_command(self, command: Awaitable[Any], timeout_s: float) -> None:
+        """An arm or takeoff command, noted for the ground evidence (``flighttest.flying.ground``): given up on
+        before its answer, the vehicle may still act on it until its timeout."""
+        t0 = self.now()
+        done_t = t0 + timeout_s
+        self.ground.command_sent(t0)
+        try:
+            await command
+            done_t = self.now()
+        except Exception:
+            done_t = self.now()
+            raise
+        finally:
+            self.ground.command_done(done_t)
 
     async def _settle(self, sp: Setpoint, min_s: float, max_s: float, baseline: bool = False,
                       must_settle: bool = True, also: Callable[[], bool] | None = None) -> None:  # fmt: skip

@@ -36,6 +36,7 @@ class TlogRecorder:
         self._thread = threading.Thread(target=self._run, name="tlog-recorder", daemon=True)
         self.messages = 0
         self.bad_data = 0
+        self.write_errors = 0
 
     @property
     def forward_url(self) -> str:
@@ -66,13 +67,23 @@ class TlogRecorder:
                     if m.get_type() == "BAD_DATA":
                         self.bad_data += 1
                         continue
-                    self._file.write(struct.pack(">Q", usec) + m.get_msgbuf())
+                    self._write(struct.pack(">Q", usec) + m.get_msgbuf())
                     self.messages += 1
             now = time.monotonic()
             if now - last_flush >= FLUSH_EVERY_S:
-                self._file.flush()
+                self._write(None)
                 last_flush = now
-        self._file.flush()
+        self._write(None)
+
+    def _write(self, record: bytes | None) -> None:
+        """A record (None: a flush); a full disk is counted and recording goes on (it may free up)."""
+        try:
+            if record is None:
+                self._file.flush()
+            else:
+                self._file.write(record)
+        except OSError:
+            self.write_errors += 1
 
     def stop(self) -> None:
         self._stop.set()
@@ -82,4 +93,7 @@ class TlogRecorder:
             self._sock.close()
         finally:
             if not self._file.closed:
-                self._file.close()
+                try:
+                    self._file.close()
+                except OSError:
+                    self.write_errors += 1

@@ -18,11 +18,16 @@ from flighttest.flying.link import Link
 from flighttest.flying.log_writer import FlightLogWriter
 from flighttest.flying.outcome import Phase
 from flighttest.flying.streamer import SetpointStreamer
+from flighttest.flying.wind import WindEstimate, WindSources
 
 # a mode counts as reported while armed once the vehicle stayed armed this long after it arrived: PX4
 # changes the mode it reports in the same heartbeat that says it disarmed (LAND → OFFBOARD or HOLD, the
 # mode before), and MAVSDK hands the two over separately
 MODE_SETTLE_S = 0.1
+# from the arm command on, a pilot's mode is a takeover and the autopilot's own failsafe modes are followed
+ARMED_PHASES = frozenset({Phase.ARM, Phase.TAKEOFF, Phase.CLIMB, Phase.SETTLE, Phase.STREAM, Phase.LAND, Phase.HOLD})
+WHERE = {Phase.ARM: " while arming", Phase.TAKEOFF: " during the takeoff", Phase.LAND: " while landing",
+         Phase.HOLD: " in the hold after the flight"}  # fmt: skip
 
 
 class WatchHost(Protocol):
@@ -32,6 +37,8 @@ class WatchHost(Protocol):
     rules: AutopilotRules  # the vehicle's autopilot: its offboard mode and its pilots' modes
     floor_active: bool  # the altitude floor applies (from the start point to the end of the descent)
     expect_offboard: bool  # flighttest flies offboard now: any other mode is a takeover or a failure
+    ground_alt_m: float  # the estimate's height of the ground, seen at arming: heights count from it
+    wind: WindSources
     ladder: gd.AbortLadder
     link: Link | None
     streamer: SetpointStreamer | None
@@ -40,6 +47,8 @@ class WatchHost(Protocol):
     def now(self) -> float: ...
     def event(self, name: str, **fields: Any) -> None: ...
     def abort(self, reason: str, first: gd.Rung = gd.Rung.RECOVER, verdict: str = "") -> None: ...
+    def takeover(self, reason: str, mode: str) -> None: ...
+    def follow_autopilot(self, reason: str) -> None: ...
 
 
 class FlightWatch:
@@ -57,36 +66,44 @@ class FlightWatch:
 
     def attach(self, link: Link) -> None:
         link.on_posvel.append(self.on_posvel)
-        link.on_attitude.append(self.guard.note_state_sample)
+        link.on_attitude.append(self.on_attitude)
         link.on_imu.append(self.on_imu)
         link.on_mode.append(self.on_mode)
         link.on_connection.append(self.on_connection)
 
-    def wind_ned_mps(self) -> tuple[float, float, float]:
-        """The wind the vehicle estimates, else the one given (``--wind``), else calm."""
-        return self.host.link.state.wind_ned_mps or self.wind_default_ned_mps
+    def wind(self) -> WindEstimate:
+        """The wind as flighttest knows it now (``flighttest.flying.wind``)."""
+        return self.host.wind.current(self.host.link.state, self.host.now())
 
-    wind_default_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)  # --wind where the vehicle reports none
+    def wind_ned_mps(self) -> tuple[float, float, float]:
+        return self.wind().ned_mps
 
     def _logged(self, d: gd.Decision) -> None:
         if self.host.log is not None:
             self.host.log.guard(d)
 
     # -- listeners ----------------------------------------------------------------------------------
+    def on_attitude(self, t: float) -> None:
+        self.guard.note_attitude(t, self.host.link.state.t_att_vehicle_s)
+
     def on_posvel(self, t: float) -> None:
         host = self.host
         st = host.link.state
         acc = host.streamer.planned_accel_mps2(self.limits.horizon_s) if host.streamer is not None else (0, 0, 0)
-        s = gd.GuardSample(t, st.vn_mps, st.ve_mps, st.vd_mps, *st.q, st.alt_m, *self.wind_ned_mps(), *acc)
+        wind = self.wind()
+        att_age = t - st.t_att if st.t_att is not None else math.inf
+        s = gd.GuardSample(t, st.vn_mps, st.ve_mps, st.vd_mps, *st.q, st.alt_m - host.ground_alt_m, *wind.ned_mps,
+                           *acc, wind_radius_mps=wind.radius_mps, att_age_s=att_age)  # fmt: skip
         # below the floor is normal on the ground and in takeoff/landing: there the guard judges the rest
         self.guard.floor_active = host.floor_active
         d = self.guard.on_sample(s)
         self.last_decision = d
-        self._logged(d)
+        if host.log is not None:
+            host.log.guard(d, wind)
         if d.margin_mps < 0 and self.first_inside_region_t is None and host.phase == Phase.STREAM:
             self.first_inside_region_t = t
         if d.aborts:
-            host.abort(d.reason, verdict=d.verdict)
+            host.abort(d.reason, gd.stale_rung(host.phase) if d.verdict == gd.STALE else gd.Rung.RECOVER, d.verdict)
         if st.armed and t - self._t_mode_change >= MODE_SETTLE_S:
             self.mode_while_armed = st.flight_mode
         timer = self.descent_timer
@@ -106,23 +123,25 @@ class FlightWatch:
                     self.host.abort(d.reason, verdict=d.verdict)
 
     def on_mode(self, old: str, new: str) -> None:
-        """A pilot mode is a takeover: the ladder finishes at once and nothing more is sent. Leaving
+        """From the arm command on, a pilot mode is a takeover: the run ends at once and nothing more is
+        sent. The autopilot's own Land or return (a failsafe) is followed, never overridden. Leaving
         offboard any other way while flighttest flies it is a failure: the ladder from Hold."""
         host = self.host
         rules = host.rules
         self._t_mode_change = host.now()
         host.event("mode", old=old, new=new)
-        if host.phase == Phase.LAND and new in rules.pilot_modes and not host.ladder.active:
-            # the pilot takes the landing over: send nothing more (the ladder, once started, sees it itself)
-            host.abort(f"pilot took over ({new}) while landing", gd.Rung.LAND)
-            host.ladder.finish(host.now(), f"pilot in control ({new})")
-            return
-        if not host.expect_offboard or new == rules.offboard_mode or host.ladder.active:
+        if host.phase not in ARMED_PHASES or host.ladder.done:
             return
         if new in rules.pilot_modes:
-            host.abort(f"pilot took over ({new})", gd.Rung.HOLD)
-            host.ladder.finish(host.now(), f"pilot in control ({new})")
-        else:
+            # the ladder, once running, sees the pilot itself (LadderExecutor, AbortLadder.step)
+            if not host.ladder.active:
+                host.takeover(f"pilot took over ({new}){WHERE.get(host.phase, '')}", new)
+            return
+        if host.ladder.active or host.phase == Phase.LAND:
+            return  # the ladder watches the modes itself; Land is flighttest's own here
+        if new in rules.failsafe_modes:
+            host.follow_autopilot(f"the autopilot switched to {new}{WHERE.get(host.phase, '')}: following it")
+        elif host.expect_offboard and new != rules.offboard_mode:
             host.abort(f"left offboard unexpectedly ({old} → {new})", gd.Rung.HOLD)
 
     def on_connection(self, connected: bool) -> None:

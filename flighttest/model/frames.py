@@ -129,6 +129,22 @@ def blade_velocity_mps(
     return bz, (bx * bx + by * by) ** 0.5
 
 
+def disk_tilt_sin(qw: FloatOrArray, qx: FloatOrArray, qy: FloatOrArray, qz: FloatOrArray) -> FloatOrArray:
+    """``sin`` of the disk's tilt: the horizontal length of body +z in NED (0 level, 1 on edge)."""
+    zn = 2.0 * (qx * qz + qw * qy)
+    ze = 2.0 * (qy * qz - qw * qx)
+    return (zn * zn + ze * ze) ** 0.5
+
+
+def worst_blade_velocity_mps(
+    w_mps: FloatOrArray, u_mps: FloatOrArray, tilt_sin: FloatOrArray, wind_radius_mps: FloatOrArray
+) -> tuple[FloatOrArray, FloatOrArray]:  # fmt: skip
+    """``(w, u)`` as bad as a horizontal wind anywhere within ``wind_radius_mps`` of the one assumed can make
+    them: a horizontal wind error δ moves ``w`` by at most ``sin(tilt)·|δ|`` and ``u`` by at most ``|δ|``.
+    Both bounds at once may be more than one δ can do: pessimistic by design, never optimistic."""
+    return w_mps + tilt_sin * wind_radius_mps, np.maximum(u_mps - wind_radius_mps, 0.0)
+
+
 @dataclass(frozen=True, slots=True)
 class GuardRegion:
     """The forbidden region in blade-frame velocity: forbidden iff ``w > max(w_allow, tan(cone)·u) − margin``.

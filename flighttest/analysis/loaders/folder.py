@@ -39,7 +39,7 @@ from flighttest.inputs import MAX_CSV_BYTES, MAX_JSON_BYTES, read_text_file, sho
 
 TLOG_NAME = "flight.tlog"
 MAX_EVENTS_BYTES = 64_000_000  # an hour of events at a few per second is ~10 MB
-TEXT_COLUMNS = {"setpoints.csv": {"phase"}, "guard.csv": {"verdict", "action", "reason"}}
+TEXT_COLUMNS = {"setpoints.csv": {"phase"}, "guard.csv": {"verdict", "action", "reason", "wind_source"}}
 # event fields with a unit are numbers; of those, these are spans that cannot be negative
 _UNIT_FIELD = re.compile(r"_(s|ms|m|mps|mps2|hz|dps|deg|pct)$")
 _NON_NEGATIVE_FIELD = re.compile(r"(^|_)(time|duration|elapsed|error|distance|jitter)(_[a-z0-9]+)*_(s|ms|m)$")
