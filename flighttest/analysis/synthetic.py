@@ -214,6 +214,8 @@ class SyntheticFlight:
             "fz": ad - G + 5 * amp * wobble(3),
         }
         out["armed"] = self.armed(t)
+        # the land detector: at home height and still (taking off and landing are in the air)
+        out["landed"] = ((-d_true < 0.05) & (np.abs(vd_true) < 0.05)).astype(float)
         # disarmed on the ground the motors stand still
         out["motors"] = np.column_stack([thrust + 0.2 * amp * wobble(4 + k) for k in range(4)]) * out["armed"][:, None]
         return out
@@ -224,8 +226,9 @@ class SyntheticFlight:
 TLOG_STREAMS = ("pos", "att", "imu", "servo", "heartbeat", "wind")
 # what a height-fault flight adds by default: the streams that show the truth, and the parameters
 TLOG_HEIGHT_STREAMS = ("global", "altitude", "baro", "gps", "params")
-# every stream write_tlog knows ("att_euler": ATTITUDE; "range": DISTANCE_SENSOR, downward)
-TLOG_ALL_STREAMS = (*TLOG_STREAMS, *TLOG_HEIGHT_STREAMS, "att_euler", "range")
+# every stream write_tlog knows ("att_euler": ATTITUDE; "range": DISTANCE_SENSOR, downward; "landed":
+# EXTENDED_SYS_STATE at 1 Hz)
+TLOG_ALL_STREAMS = (*TLOG_STREAMS, *TLOG_HEIGHT_STREAMS, "att_euler", "range", "landed")
 _SENSOR_RATES_HZ = {"altitude": 10.0, "baro": 10.0, "gps": 5.0, "range": 10.0}
 
 
@@ -259,8 +262,8 @@ def write_tlog(
     when the flight has a height fault. "pos" is LOCAL_POSITION_NED, "global" GLOBAL_POSITION_INT
     (leave out "pos" for a log whose position is the global one, as ArduCopter 3.x streamed),
     "altitude" ALTITUDE, "baro" SCALED_PRESSURE, "gps" GPS_RAW_INT (the first fix is a no-fix),
-    "range" DISTANCE_SENSOR, "params" PARAM_VALUE of ``params`` (default ``PX4_PARAMS`` /
-    ``ARDUPILOT_PARAMS``) before the first sample."""
+    "range" DISTANCE_SENSOR, "landed" EXTENDED_SYS_STATE, "params" PARAM_VALUE of ``params`` (default
+    ``PX4_PARAMS`` / ``ARDUPILOT_PARAMS``) before the first sample."""
     from pymavlink.dialects.v20 import common as mavlink
 
     if streams is None:
@@ -310,6 +313,9 @@ def write_tlog(
             )
             if gcs_heartbeats:
                 add(ts + gcs.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(gcs))
+            if "landed" in streams:
+                landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND if s["landed"][i] else mavlink.MAV_LANDED_STATE_IN_AIR
+                add(ts + mav.extended_sys_state_encode(0, landed_state).pack(mav))
             if "wind" in streams:
                 add(ts + mav.wind_cov_encode(ms * 1000, wind[0], wind[1], wind[2], 0, 0, 0, 0, 0).pack(mav))
         if "pos" in streams:
