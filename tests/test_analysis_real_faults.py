@@ -5,7 +5,11 @@ the real logs it was written about, in each format (.bin, .tlog, .ulg):
   ``.BIN``): the descents come from the barometer, which agrees with the ground;
 - an estimator excursion 7.5 m below the ground and back at the landing (the ArduCopter 3.4
   ``.tlog``): flagged as a glitch with its span and what each source said, not reported as a descent;
-- a DataFlash log without ATT but with AHR2 and XKQ: blade-frame exposure all the same, the source named.
+- a DataFlash log without ATT but with AHR2 and XKQ: blade-frame exposure all the same, the source named;
+- issue 23, the ArduCopter 3.4 ``.tlog``'s hard landing as it really was: both position messages of its one
+  estimator run on down to 7.8 m below home for half a minute after the touch-down, the vehicle armed on
+  the ground, the GPS altitude sagging with them: the descent is the barometer's fall, the run-on a glitch
+  (on the real log too, when ``FLIGHTTEST_AC34_TLOG`` names it).
 
 The flight takes off from home, climbs 10 m and lands with a raised-cosine 10 m descent in 5 s
 (15–20 s): its start and end follow in closed form from the segmentation's tolerances, and the same
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import pytest
@@ -186,3 +191,66 @@ def test_report_names_the_sources_and_draws_both_heights(tmp_path, monkeypatch):
     assert any(f"{estimator} (estimator, trusted), glitches bridged" in t for t in legend)
     assert any(t.get_text().strip() == f"disagreement: {estimator}" for t in fig.axes[0].texts)
     report.plt.close(fig)
+
+
+# -- issue 23: the ArduCopter 3.4 .tlog's hard landing ---------------------------------------------------
+
+# A 9 m hover falls to the ground in 2 s at FALL_T0 (the barometer's fall, 7.1 m/s peak); the estimator's
+# error then grows at 0.2 m/s to 7.8 m below home over 37 s and is gone within 10 s, the vehicle armed on
+# the ground to the end; the GPS altitude sags with it (ArduCopter 3.4's EKF fuses GPS vertical velocity).
+# The streams ArduCopter 3.4 sent at 10 Hz: no ALTITUDE, no EXTENDED_SYS_STATE, Euler ATTITUDE.
+FALL_T0 = 240.0
+AC34 = SyntheticFlight(
+    duration_s=FALL_T0 + 60.0,
+    start_alt_m=0.0,
+    descents=[(5.0, -9.0, 6.0), (FALL_T0, 9.0, 2.0)],
+    ekf_error_knots=((FALL_T0, 0.0), (FALL_T0 + 2, 0.4), (FALL_T0 + 39, 7.8), (FALL_T0 + 44, 0.3), (FALL_T0 + 49, 0.0)),
+    gps_error_knots=((FALL_T0, 0.0), (FALL_T0 + 2, 0.4), (FALL_T0 + 39, 6.5), (FALL_T0 + 45, 0.5), (FALL_T0 + 55, 0.0)),
+    disarm_s=math.inf,
+    gps_noise_m=1.0,
+    baro_noise_m=0.15,
+)
+AC34_STREAMS = ("pos", "global", "baro", "gps", "heartbeat", "att_euler", "servo", "params")
+AC34_TLOG = os.environ.get("FLIGHTTEST_AC34_TLOG")
+
+
+def _analyse_json(path: Path, capsys) -> dict:
+    capsys.readouterr()
+    assert main(["analyse", str(path), "--json", "--vehicle", "x500", "--jobs", "1"]) == 0
+    (d,) = json.loads(capsys.readouterr().out)
+    return d
+
+
+def _assert_hard_landing(d: dict, fall_s: float, duration_s: tuple[float, float]) -> dict:
+    """The landing is the barometer's 8–10 m fall, nothing is over 12 m, and the estimator's run-on
+    below the ground is one listed glitch of LOCAL_POSITION_NED.z, with what every source said."""
+    assert d["height_source"] == "LOCAL_POSITION_NED.z"
+    assert max(x["height_m"] for x in d["descents"]) < 12.0, [(x["start_s"], x["height_m"]) for x in d["descents"]]
+    (x,) = [x for x in d["descents"] if fall_s - 10.0 < x["start_s"] < fall_s + 10.0]
+    assert 8.0 <= x["height_m"] <= 10.0 and duration_s[0] <= x["duration_s"] <= duration_s[1], x
+    (g,) = [g for g in d["glitches"] if g["kind"] == "disagreement" and g["start_s"] > fall_s - 10.0]
+    assert g["source"] == "LOCAL_POSITION_NED.z" and g["max_jump_m"] > 5.0
+    said = g["sources"]
+    assert said["LOCAL_POSITION_NED.z"] < -5.0 and said["GLOBAL_POSITION_INT.relative_alt"] < -5.0
+    assert abs(said["SCALED_PRESSURE.press_abs"]) < 2.5
+    assert any("the ground outranks" in n for n in d["notes"]) and not any("sided with it" in n for n in d["notes"])
+    return x
+
+
+def test_ardupilot_34_hard_landing_is_the_barometers_fall(tmp_path, capsys):
+    path = write_tlog(AC34, tmp_path / "ac34.tlog", rate_hz=10.0, autopilot="ardupilot", streams=AC34_STREAMS)
+    d = _analyse_json(path, capsys)
+    origin = float(load_log(path).state["boot_s"].iloc[0]) - 5.0  # write_tlog's boot clock starts at 5 s
+    x = _assert_hard_landing(d, FALL_T0 - origin, (1.5, 4.5))  # the 2 s fall less the segmentation's tolerances
+    assert x["max_rate_mps"] == pytest.approx(math.pi * 9.0 / 4.0, abs=0.3)
+    (g,) = [g for g in d["glitches"] if g["kind"] == "disagreement"]
+    assert g["start_s"] + origin == pytest.approx(FALL_T0 + 1.0, abs=1.5)  # the run-on, from the fall
+    assert FALL_T0 + 43.0 < g["end_s"] + origin < FALL_T0 + 50.0  # ... to where the estimator is back
+    assert g["max_jump_m"] == pytest.approx(7.8, abs=0.3)
+    assert g["sources"]["GPS_RAW_INT.alt"] < -5.0  # the referee the ground overrules
+
+
+@pytest.mark.skipif(not (AC34_TLOG and Path(AC34_TLOG).is_file()), reason="FLIGHTTEST_AC34_TLOG: the real log")
+def test_the_real_ardupilot_34_tlog(capsys):
+    """The issue's log itself (not in the repository): its hard landing about 1094 s in."""
+    _assert_hard_landing(_analyse_json(Path(AC34_TLOG), capsys), 1094.0, (2.0, 4.5))

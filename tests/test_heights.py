@@ -244,3 +244,95 @@ def test_baro_datum_never_changes_the_verdict(offset_m, case):
     assert list(got.sources["consistent"]) == list(base.sources["consistent"])
     assert len(got.glitches) == len(base.glitches)
     assert np.allclose(got.height_m, base.height_m, atol=1e-6 * max(1.0, abs(offset_m)))
+
+
+# -- issue 23: independent witnesses only, and the ground outranks an estimator -----------------------
+
+T34 = np.arange(0.0, 150.0, 1 / RATE_HZ)
+ARMED34 = (T34 >= 8.0).astype(float)  # armed on the ground after the landing, to the end of the log
+
+
+def knots(t: np.ndarray, pts: list[tuple[float, float]]) -> np.ndarray:
+    """Piecewise-linear through ``pts``, 0 outside them."""
+    kt, kv = np.array(pts).T
+    return np.where((t >= kt[0]) & (t <= kt[-1]), np.interp(t, kt, kv), 0.0)
+
+
+def ac34_case(ground_m: float = 0.0, baro_wobble_m: float = 0.0, landed: bool = False):
+    """The ArduCopter 3.4 .tlog's hard landing (issue 23) in small: up to 6 m, then down in 2 s at 120 s
+    onto ground ``ground_m`` above home (a slope: below it). Both position messages of its one estimator
+    run on down to 7.6 m below that ground after the touch-down and come back, the vehicle armed on the
+    ground; the GPS altitude sags with them (an estimator fusing GPS vertical velocity drifts with it),
+    so a GPS referee sides with the estimator. The barometer wobbles by ``baro_wobble_m`` on the ground
+    (prop wash); ``landed``: the state has the land detector's flag."""
+    truth = profile(T34, [(10.0, 6.0, 4.0), (120.0, ground_m - 6.0, 2.0)])
+    sink = knots(T34, [(120.0, 0.0), (122.0, 0.4), (136.0, 7.6), (139.0, 0.3), (142.0, 0.0)])
+    est = truth - sink
+    baro = truth + 250.0 + baro_wobble_m * np.sin(2 * np.pi * T34) * (T34 > 122.0)
+    rng = np.random.default_rng(34)
+    gps = truth - 0.8 * sink + 480.0 + rng.normal(0, 1.0, len(T34))
+    state = state_for(T34, est, ARMED34)
+    if landed:
+        state["landed"] = ((T34 < 10.0) | (T34 > 122.0)).astype(float)
+    sources = [
+        src("LOCAL_POSITION_NED.z", "estimator", T34, est, home_relative=True, rate_hz=10),
+        src("GLOBAL_POSITION_INT.relative_alt", "estimator", T34, est + 0.02, home_relative=True, rate_hz=10),
+        src("SCALED_PRESSURE.press_abs", "baro", T34, baro, rate_hz=10),
+        src("GPS_RAW_INT.alt", "gps", T34, gps, rate_hz=5),
+    ]
+    return state, sources
+
+
+@pytest.mark.parametrize("ground_m", [0.0, -3.0])
+def test_estimator_below_the_resting_barometer_is_a_glitch_whatever_the_gps_says(ground_m):
+    """The barometer at rest on the ground (at home, or 3 m below it: the lowest level it rests at)
+    outranks the estimator and the GPS that sides with it: the excursion is one glitch, bridged, and the
+    landing is the barometer's."""
+    state, sources = ac34_case(ground_m)
+    a = analyse(FlightLog(Path("ac34.tlog"), "tlog", state, heights=sources))
+    h = a.heights
+    assert h.source == "LOCAL_POSITION_NED.z" and h.is_estimator
+    (g,) = a.glitches.itertuples()
+    assert g.kind == "disagreement" and g.source == "LOCAL_POSITION_NED.z"
+    assert 119.5 < g.start_s < 122.5 and 138.5 < g.end_s < 142.5
+    assert g.sources["GLOBAL_POSITION_INT.relative_alt"] == pytest.approx(ground_m - 7.6, abs=0.2)
+    assert g.sources["SCALED_PRESSURE.press_abs"] == pytest.approx(ground_m, abs=0.2)
+    assert g.sources["GPS_RAW_INT.alt"] < ground_m - 3.0  # the referee went down with the estimator
+    assert any("the ground outranks" in n for n in h.notes) and not any("sided with it" in n for n in h.notes)
+    landing = a.descents[a.descents["start_s"] > 110.0]
+    assert len(landing) == 1 and landing["height_m"].iloc[0] == pytest.approx(6.0 - ground_m, abs=0.3)
+    assert landing["duration_s"].iloc[0] < 3.0 and a.descents["height_m"].max() < 6.0 - ground_m + 0.5
+
+
+@pytest.mark.parametrize("landed", [True, False])
+def test_the_land_detector_is_a_ground_witness(landed):
+    """On ground 3 m below home with the barometer wobbling in the prop wash, neither the barometer
+    (not at rest, and below the 2 m tolerance itself) nor home says where the ground is: only the land
+    detector does. Without it the GPS referee, sagging with the estimator, still sides with it."""
+    state, sources = ac34_case(ground_m=-3.0, baro_wobble_m=0.6, landed=landed)
+    h = arbitrate(state, sources)
+    assert h.is_estimator
+    if landed:
+        assert len(h.glitches) == 1 and h.bridged[(T34 > 125) & (T34 < 137)].all()
+        assert any("the ground outranks" in n for n in h.notes)
+    else:
+        assert h.glitches.empty and any("sided with it" in n for n in h.notes)
+
+
+def test_one_estimators_two_streams_are_one_vote():
+    """Judging the GPS, the estimator's local and global heights count once beside the barometer: its
+    7.5 m excursion moves that consensus by half of it, not all of it (a median of three streams, two
+    of them the estimator's, would follow the estimator)."""
+    state, sources = tlog_case()
+    est = sources[0]
+    rng = np.random.default_rng(5)
+    sources = [
+        HeightSource("LOCAL_POSITION_NED.z", "estimator", est.t_s, est.alt_m + 0.01, True),
+        est,
+        sources[1],
+        src("GPS_RAW_INT.alt", "gps", T, TRUTH + 480.0 + rng.normal(0, 0.3, len(T)), rate_hz=5),
+    ]
+    h = arbitrate(state, sources)
+    rows = h.sources.set_index("name")
+    assert rows.loc["GPS_RAW_INT.alt", "max_disagreement_m"] == pytest.approx(7.5 / 2, abs=0.8)
+    assert rows.loc["GPS_RAW_INT.alt", "consistent"]

@@ -381,3 +381,41 @@ def test_ardupilot_reference_bin_without_att(ap_bin, ap_log, monkeypatch, source
     ok = np.isfinite(q).all(axis=1) & np.isfinite(q0).all(axis=1)
     angle_deg = np.degrees(2 * np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", q[ok], q0[ok])), 0, 1)))
     assert ok.mean() > 0.9 and np.median(angle_deg) < 3.0
+
+
+# -- the land detector (state column "landed"), a ground witness for the height arbitration ----------
+
+
+def test_tlog_landed_state_from_extended_sys_state(tmp_path):
+    """1 on the ground before take-off (3 s) and after the landing (20 s), 0 in the air; absent: NaN."""
+    state = load_log(_tlog(tmp_path)).state
+    t, landed = state["t_s"].to_numpy(), state["landed"].to_numpy()
+    assert (landed[(t > 0.1) & (t < 2.5)] == 1).all() and (landed[(t > 4.0) & (t < 19.5)] == 0).all()
+    assert (landed[t > 21.5] == 1).all()
+    assert load_log(_tlog_ardupilot_global(tmp_path)).state["landed"].isna().all()
+
+
+def _landed_changes(log: FlightLog) -> list[tuple[float, float]]:
+    """(t_s, value) of the land detector's first known value and of every change after it."""
+    t, landed = log.state["t_s"].to_numpy(), log.state["landed"].to_numpy()
+    known = np.flatnonzero(np.isfinite(landed))
+    k = known[np.concatenate([[True], landed[known][1:] != landed[known][:-1]])]
+    return [(float(t[i]), float(landed[i])) for i in k]
+
+
+@needs_px4
+def test_px4_land_detector_in_ulog_and_tlog(px4_ulog):
+    """vehicle_land_detected.landed and EXTENDED_SYS_STATE: in the air between arming and disarming."""
+    for log in (px4_ulog, load_log(PX4_FLIGHT)):
+        changes = _landed_changes(log)
+        assert [v for _, v in changes] == [1.0, 0.0, 1.0], changes
+        armed = log.state["armed"].to_numpy() == 1
+        t = log.state["t_s"].to_numpy()
+        assert t[armed].min() < changes[1][0] and changes[2][0] < t[armed].max()
+
+
+@needs_ap
+def test_ardupilot_land_detector_from_ev_records(ap_log):
+    """DataFlash EV 28 (NOT_LANDED) then 18 (LAND_COMPLETE): the take-off and the touch-down (the log
+    starts at arming, before the detector's first change)."""
+    assert [v for _, v in _landed_changes(ap_log)] == [0.0, 1.0]

@@ -2,10 +2,16 @@
 
 Real logs disagree with themselves. An ArduCopter 4.5 ``.BIN`` had every EKF height (CTUN.Alt, POS,
 XKF1) 4–12 m below home for the whole flight, on the ground too, while BARO.Alt showed the real
-climb and descent; an ArduCopter 3.4 ``.tlog`` had GLOBAL_POSITION_INT run 7.5 m below home and back
-at a hard landing while SCALED_PRESSURE showed a real descent of less than half that. Descents timed
-on such a height are fiction, so :func:`arbitrate` picks the height to time them on. The rules, with
-every threshold in :class:`HeightConfig`:
+climb and descent; an ArduCopter 3.4 ``.tlog`` had LOCAL_POSITION_NED and GLOBAL_POSITION_INT run on
+down to 7.6–8.0 m below home after a hard landing and come back later, with the vehicle armed on the
+ground, while SCALED_PRESSURE fell about 9 m in 2 s and stayed there (timed on the estimator: one
+16.7 m descent lasting 39.9 s). Descents timed on such a height are fiction, so :func:`arbitrate`
+picks the height to time them on. The rules, with every threshold in :class:`HeightConfig`:
+
+**Witnesses.** Sources are grouped by what produced them (:func:`witness`): one estimator's streams
+(local and global position, VFR_HUD, POS/CTUN/XKF, vehicle_local/global_position) are one witness,
+the barometers another, GPS and a rangefinder each their own. Two outputs of one producer are one
+opinion: they never make a consensus or a referee for each other, and they count once in a median.
 
 **Ground windows.** Before take-off and after landing the vehicle stands at home height. Where the
 log has the armed flag anywhere, the ground windows are the samples *disarmed* before the first armed
@@ -34,19 +40,29 @@ spikes — the estimator stays raw, its jumps are what is looked for):
   was set (before take-off, else after landing: they must read ≈ 0 there), and in the post-landing
   window after referencing at the pre-take-off one (the drift over the flight);
 - *below ground*: how far the referenced height goes below 0 outside the ground windows;
-- *disagreement*: the difference from the consensus of the other sources that passed the ground
-  check: the median of the other estimators/barometers (never an estimator against another
-  estimator stream: they are one filter), else of the rangefinders, else of GPS — each instant
-  falling back to the next tier where the first has no sample. Spans where it exceeds the tolerance
-  (``disagree_tol_m``, ``gps_tol_m`` where GPS is involved, plus ``lag_s`` × the consensus' climb or
-  sink rate: streams lag each other by a few tenths of a second, 1 Hz messages are timed on arrival,
-  and a 5 m/s descent turns 0.4 s of lag into 2 m) are extended to where the difference is
-  back within ``edge_m`` of its level around the span and on while it still closes in on that level
-  (down to ``edge_floor_m``: a smooth excursion is over where it stops approaching, not at the band,
-  and sensor noise must not drag the edge along), and joined across gaps below ``merge_gap_s``.
-  A span is **not** blamed on the source when the consensus is the one that went below the ground
-  while the source did not, or when a referee (rangefinder, else GPS, not used in the consensus) sits
-  closer to the source than to the consensus.
+- *disagreement*: the difference from the consensus of the other witnesses' sources that passed the
+  ground check: the median over the estimator and barometer witnesses (each its own streams' median),
+  else over the rangefinders, else over GPS — each instant falling back to the next tier where the
+  first has no sample. Spans where it exceeds the tolerance (``disagree_tol_m``, ``gps_tol_m`` where
+  GPS is involved, plus ``lag_s`` × the consensus' climb or sink rate: streams lag each other by a few
+  tenths of a second, 1 Hz messages are timed on arrival, and a 5 m/s descent turns 0.4 s of lag
+  into 2 m) are extended to where the difference is back within ``edge_m`` of its level over
+  ``edge_window_s`` next to the span, then on outwards while its 1 s mean still closes in at
+  ``edge_rate_mps`` or faster (up to ``edge_walk_s``; the level next to a span may sit on a slow ramp,
+  and a smooth excursion is over where it stops approaching, not at the band), and back in to the
+  first sample within ``edge_floor_m`` of the level beyond; spans closer than ``merge_gap_s`` are one.
+  **The ground outranks an estimator**: a span is blamed on an estimator, whatever a referee says,
+  where the estimator is more than ``below_ground_tol_m`` below the ground while the vehicle stands
+  on it — disarmed, its land detector saying landed, or the barometers at rest (quiet within
+  ``still_band_m`` over a second for at least ``min_ground_s``) within ``ground_tol_m`` of home or of
+  the lowest level they rest at (:func:`_ground_rest`) — or while the consensus stays above it, the
+  difference out of tolerance (the ground is at home, or where the barometers rest when that is
+  lower: a landing below home or a barometer that drifted low does not excuse an estimator below
+  both). Otherwise a span is **not** blamed on the source when the consensus is the one that went
+  below the ground while the source did not, or when a referee (rangefinder, else GPS, not used in
+  the consensus) sits closer to the source than to the consensus. (On the ArduCopter 3.4 ``.tlog`` a
+  GPS referee cleared the 7.6 m excursion: the GPS altitude can sink with an estimator that fuses
+  GPS vertical velocity.)
 
 A source is **consistent** when it could be referenced, its ground error is within ``ground_tol_m``
 (``gps_tol_m`` for GPS), and its blamed disagreement spans and below-ground spans each cover at most
@@ -112,7 +128,9 @@ class HeightConfig:
     max_bad_fraction: float = 0.25  # spans covering more of the flight than this: inconsistent, not glitches
     edge_m: float = 0.5  # a span extends to where the difference is back within this of its level around it
     edge_window_s: float = 5.0  # ... that level: the median difference over this long before / after the span
-    edge_floor_m: float = 0.1  # ... and on while it still closes in, until within this (noise stops it anyway)
+    edge_rate_mps: float = 0.1  # ... then on while its 1 s mean still closes in at least this fast (a ramp) ...
+    edge_walk_s: float = 60.0  # ... at most this far (a ramp's start, not the other end of the flight) ...
+    edge_floor_m: float = 0.1  # ... to the first sample within this of the level found beyond it
     merge_gap_s: float = 1.0  # spans closer than this are one span
     smooth_s: float = 0.5  # running median on every source but the estimator, against spikes
     max_gap_s: float = 1.0  # a stream is interpolated across gaps up to this (or three of its periods)
@@ -291,9 +309,25 @@ class _Src:
     spans: list[tuple[int, int]] = field(default_factory=list)  # blamed disagreement spans
     offsets: list[list[float]] = field(default_factory=list)  # ... the difference's level before / after each
     cleared: int = 0  # disagreement spans not blamed on this source
+    grounded: int = 0  # blamed spans where it went below the ground while the ground said otherwise
     judged_by: list[str] = field(default_factory=list)  # the sources its consensus came from
     refereed: bool = False  # a referee (rangefinder / GPS) outside the consensus was there to ask
     reasons: list[str] = field(default_factory=list)
+
+
+def witness(src: HeightSource) -> str:
+    """What produced a source. One estimator's streams (local and global position, VFR_HUD, POS/CTUN/XKF,
+    vehicle_local/global_position) are one witness, the barometers another, GPS and rangefinders each
+    their own: two outputs of one producer are one opinion, never a consensus or a referee for each other."""
+    return src.kind
+
+
+def _witness_median(group: list[_Src], n: int) -> np.ndarray:
+    """Median over witnesses of each witness's own median: an estimator's two streams are one vote."""
+    by: dict[str, list[np.ndarray]] = {}
+    for s in group:
+        by.setdefault(witness(s.src), []).append(s.h)
+    return _tier_median([_tier_median(cols, n) for cols in by.values()], n)
 
 
 def _tol(kind: str, cfg: HeightConfig) -> float:
@@ -347,19 +381,55 @@ def _ground_checks(s: _Src, pre: np.ndarray, post: np.ndarray, flying: np.ndarra
     s.ground_ok = bool(s.referenced) and not s.reasons
 
 
+def _long_runs(t: np.ndarray, mask: np.ndarray, min_s: float) -> np.ndarray:
+    """``mask`` with its True runs shorter than ``min_s`` cleared."""
+    runs = np.array(true_runs(mask), dtype=int).reshape(-1, 2)
+    runs = runs[t[runs[:, 1]] - t[runs[:, 0]] >= min_s]
+    step = np.zeros(len(mask) + 1, dtype=int)
+    np.add.at(step, runs[:, 0], 1)
+    np.add.at(step, runs[:, 1] + 1, -1)
+    return np.cumsum(step[:-1]) > 0
+
+
+def _ground_rest(state: pd.DataFrame, srcs: list[_Src], cfg: HeightConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(on the ground, the ground's height above home there) on the state clock, from the witnesses an
+    estimator cannot overrule: disarmed, a landed state on the ground, or the barometers at rest (quiet
+    within ``still_band_m`` over a second for at least ``min_ground_s``) at their ground level: within
+    ``ground_tol_m`` of home, or of the lowest level they rest at in the log (a barometer that drifted
+    low over a long flight; a hover rests higher than the ground it later lands on). The ground is at
+    home, or where the barometers rest when that is lower (an estimator is then below the ground only
+    below both)."""
+    t = state["t_s"].to_numpy(float)
+    n = len(t)
+    on = np.zeros(n, dtype=bool)
+    for col, ground_value in (("armed", 0.0), ("landed", 1.0)):
+        if col in state:
+            on |= state[col].to_numpy(float) == ground_value
+    floor = np.zeros(n)
+    baros = [s for s in srcs if s.src.kind == "baro" and s.ground_ok]
+    if baros:
+        hb = _witness_median(baros, n)
+        roll = pd.Series(hb).rolling(_window(t, 1.0), center=True, min_periods=1)
+        quiet = _long_runs(t, (roll.max() - roll.min()).to_numpy() <= cfg.still_band_m, cfg.min_ground_s)
+        if quiet.any():
+            run = np.cumsum(np.diff(np.concatenate([[0], quiet.astype(np.int8)])) == 1)
+            lowest = float(pd.Series(hb[quiet]).groupby(run[quiet]).median().min())
+            rest = quiet & ((np.abs(hb) <= cfg.ground_tol_m) | (hb - lowest <= cfg.ground_tol_m))
+            on |= rest
+            floor = np.where(rest, np.minimum(hb, 0.0), 0.0)
+    return on, floor
+
+
 def _consensus(i: int, srcs: list[_Src], cfg: HeightConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """(consensus, tolerance, referee, who) for source i from the ground-checked others (module docstring)."""
     me = srcs[i]
     n = len(me.raw)
-    others = [s for j, s in enumerate(srcs) if j != i and s.ground_ok]
-    t1 = [
-        s
-        for s in others
-        if s.src.kind in ("estimator", "baro") and not (me.src.kind == "estimator" and s.src.kind == "estimator")
-    ]
+    mine = witness(me.src)
+    others = [s for j, s in enumerate(srcs) if j != i and s.ground_ok and witness(s.src) != mine]
+    t1 = [s for s in others if s.src.kind in ("estimator", "baro")]
     t2 = [s for s in others if s.src.kind == "rangefinder"]
     t3 = [s for s in others if s.src.kind == "gps"]
-    m1, m2, m3 = (_tier_median([s.h for s in tier], n) for tier in (t1, t2, t3))
+    m1, m2, m3 = (_witness_median(tier, n) for tier in (t1, t2, t3))
     tol_me = cfg.gps_tol_m if me.src.kind == "gps" else cfg.disagree_tol_m
     cons = m1.copy()
     tol = np.full(n, tol_me)
@@ -393,9 +463,13 @@ def _levels(diff: np.ndarray, t: np.ndarray, a: int, b: int, bad: np.ndarray, cf
     return [float(_nanmedian(diff[idx])) if len(idx) else float("nan") for idx in _around(diff, t, a, b, bad, cfg)]
 
 
-def _extend(diff: np.ndarray, t: np.ndarray, a: int, b: int, bad: np.ndarray, cfg: HeightConfig) -> tuple[int, int]:
-    """Grow the span [a, b] to where the difference is back within ``edge_m`` of its level around it."""
+def _extend(
+    diff: np.ndarray, smooth: np.ndarray, t: np.ndarray, a: int, b: int, bad: np.ndarray, cfg: HeightConfig
+) -> tuple[int, int]:
+    """Grow the span [a, b] to where the difference is back at its level outside it (module docstring)."""
     before, after = _around(diff, t, a, b, bad, cfg)
+    lag = _window(t, 1.0)
+    n = len(t)
     for side, idx in ((-1, before), (1, after)):
         if not len(idx):
             continue
@@ -403,13 +477,27 @@ def _extend(diff: np.ndarray, t: np.ndarray, a: int, b: int, bad: np.ndarray, cf
         back = idx[np.abs(diff[idx] - level) <= cfg.edge_m]
         if not len(back):
             continue
-        # from the first sample back within the band, on outwards while the difference still closes in
-        # on its level (a smooth excursion is only over where it stops approaching, not at the band)
+        # a smooth excursion is over where it stops approaching, not at the band, and the level next to
+        # the span may sit on a slow ramp (an estimator sinking at 0.2 m/s for half a minute): follow the
+        # approach outwards a second at a time on the 1 s mean (sample-to-sample steps drown in the
+        # sensors' noise), then come back in to the first sample at the level found beyond the ramp
+        # (the 1 s mean smears a sharp edge by half a second)
         k = int(back[-1]) if side < 0 else int(back[0])
-        run = idx[idx <= k][::-1] if side < 0 else idx[idx >= k]
-        dev = np.abs(diff[run] - level)
-        stop = np.flatnonzero(~((np.diff(dev) < 0) & (dev[:-1] > cfg.edge_floor_m)))
-        k = int(run[stop[0]]) if len(stop) else int(run[-1])
+        sign = np.sign(_nanmedian(diff[a : b + 1]) - level)
+        reach = int(np.searchsorted(t, t[k] + side * cfg.edge_walk_s, side="left" if side < 0 else "right"))
+        run = np.arange(k, max(reach, 0) - 1, -1) if side < 0 else np.arange(k, min(reach, n))
+        ahead = np.clip(run + side * lag, 0, n - 1)
+        with np.errstate(invalid="ignore"):
+            closing = sign * (smooth[run] - smooth[ahead]) >= cfg.edge_rate_mps * np.abs(t[run] - t[ahead])
+        stop = np.flatnonzero(~closing)
+        run = run[: stop[0] + 1] if len(stop) else run
+        lo = int(np.searchsorted(t, t[run[-1]] - cfg.edge_window_s))
+        hi = int(np.searchsorted(t, t[run[-1]] + cfg.edge_window_s, side="right"))
+        beyond = np.arange(lo, run[-1] + 1) if side < 0 else np.arange(run[-1], hi)
+        beyond = beyond[~bad[beyond] & np.isfinite(diff[beyond])]
+        outer = _nanmedian(diff[beyond]) if len(beyond) else level
+        at = np.flatnonzero(np.abs(diff[run] - outer) <= cfg.edge_floor_m)
+        k = int(run[at[0]]) if len(at) else int(run[-1])
         if side < 0:
             a = k + 1
         else:
@@ -417,7 +505,14 @@ def _extend(diff: np.ndarray, t: np.ndarray, a: int, b: int, bad: np.ndarray, cf
     return a, b
 
 
-def _disagreement(i: int, srcs: list[_Src], t: np.ndarray, flying: np.ndarray, cfg: HeightConfig) -> None:
+def _disagreement(
+    i: int,
+    srcs: list[_Src],
+    t: np.ndarray,
+    flying: np.ndarray,
+    rest: tuple[np.ndarray, np.ndarray],
+    cfg: HeightConfig,
+) -> None:
     s = srcs[i]
     if not s.referenced:
         return
@@ -431,9 +526,20 @@ def _disagreement(i: int, srcs: list[_Src], t: np.ndarray, flying: np.ndarray, c
     diff = s.h - cons
     s.max_disagreement_m = _nanmax(np.abs(diff[valid]))
     bad = valid & (np.abs(diff) > tol)
+    # an estimator below the ground, out of tolerance with the others, where the vehicle stood on the
+    # ground or the independent heights stayed above it went through the ground: neither its sibling
+    # streams nor a referee can vouch for it (the tolerance keeps a lagging barometer crossing the line
+    # a moment after the estimator at a landing from counting)
+    on, floor = rest
+    sunk = np.zeros(len(t), dtype=bool)
+    if s.src.kind == "estimator":
+        deep = floor - cfg.below_ground_tol_m
+        with np.errstate(invalid="ignore"):
+            sunk = bad & (s.h < deep) & (on | (cons >= deep))
     spans: list[list[int]] = []
+    smooth = pd.Series(diff).rolling(_window(t, 1.0), center=True, min_periods=1).mean().to_numpy()
     for a, b in true_runs(bad):
-        a, b = _extend(diff, t, int(a), int(b), bad, cfg)
+        a, b = _extend(diff, smooth, t, int(a), int(b), bad, cfg)
         if spans and t[a] - t[spans[-1][1]] < cfg.merge_gap_s:
             spans[-1][1] = max(b, spans[-1][1])
         else:
@@ -442,18 +548,11 @@ def _disagreement(i: int, srcs: list[_Src], t: np.ndarray, flying: np.ndarray, c
     blamed_n = 0
     for a, b in spans:
         sl = slice(a, b + 1)
-        c_low = np.isfinite(cons[sl]).any() and np.nanmin(cons[sl]) < -cfg.below_ground_tol_m
-        me_low = np.isfinite(s.h[sl]).any() and np.nanmin(s.h[sl]) < -cfg.below_ground_tol_m
-        if c_low and not me_low:
+        if sunk[sl].any():
+            s.grounded += 1
+        elif _cleared(s.h[sl], cons[sl], referee[sl], cfg):
             s.cleared += 1
             continue
-        r = referee[sl]
-        if np.isfinite(r).sum() * 2 >= b - a + 1:
-            e_me = _nanmedian(np.abs(s.h[sl] - r))
-            e_c = _nanmedian(np.abs(cons[sl] - r))
-            if e_me < e_c:
-                s.cleared += 1
-                continue
         s.spans.append((a, b))
         s.offsets.append(_levels(diff, t, a, b, bad, cfg))
         blamed_n += int(valid[sl].sum())
@@ -466,6 +565,18 @@ def _disagreement(i: int, srcs: list[_Src], t: np.ndarray, flying: np.ndarray, c
         )
         if s.bad_fraction > cfg.max_bad_fraction:
             s.reasons.append(msg)
+
+
+def _cleared(me: np.ndarray, cons: np.ndarray, referee: np.ndarray, cfg: HeightConfig) -> bool:
+    """A disagreement span not blamed on the source: the consensus is the one that went below the
+    ground, or the referee (sampled over at least half the span) sits closer to the source."""
+    c_low = np.isfinite(cons).any() and np.nanmin(cons) < -cfg.below_ground_tol_m
+    me_low = np.isfinite(me).any() and np.nanmin(me) < -cfg.below_ground_tol_m
+    if c_low and not me_low:
+        return True
+    if np.isfinite(referee).sum() * 2 >= len(referee):
+        return bool(_nanmedian(np.abs(me - referee)) < _nanmedian(np.abs(cons - referee)))
+    return False
 
 
 def _bridge(s: _Src, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -568,8 +679,9 @@ def arbitrate(state: pd.DataFrame, sources: list[HeightSource], cfg: HeightConfi
     for s in srcs:
         _ground_checks(s, pre, post, flying, cfg)
     if len(srcs) > 1:
+        rest = _ground_rest(state, srcs, cfg)
         for i in range(len(srcs)):
-            _disagreement(i, srcs, t, flying, cfg)
+            _disagreement(i, srcs, t, flying, rest, cfg)
     consistent = [bool(s.referenced) and not s.reasons for s in srcs]
     if consistent[0] or len(srcs) == 1:
         pick = 0
@@ -598,6 +710,12 @@ def arbitrate(state: pd.DataFrame, sources: list[HeightSource], cfg: HeightConfi
                 f"{len(glitches)} span(s) where {trusted.src.name} disagrees with {', '.join(trusted.judged_by)}: "
                 "flagged as estimator glitches and bridged with them"
                 + (" (no third source to referee: the estimator is presumed wrong)" if alone else "")
+            )
+        if trusted.grounded:
+            notes.append(
+                f"{trusted.grounded} of them with {trusted.src.name} below the ground while the vehicle stood on it "
+                "(disarmed, landed, or the barometer at rest there) or every independent height stayed above it: "
+                "the ground outranks an estimator and any referee"
             )
         if trusted.cleared:
             notes.append(

@@ -22,6 +22,9 @@ State columns (``STATE_COLUMNS``), all SI, NED/FRD as in CONVENTIONS §1:
                    log shows active (usually 4)
 ``mode``           flight mode name as pymavlink/PX4/ArduPilot name it (string)
 ``armed``          armed flag (float 1/0, NaN unknown)
+``landed``         the autopilot's land detector: 1 on the ground, 0 in the air (taking off and
+                   landing count as in the air), NaN unknown (most logs before ArduCopter 4 and PX4
+                   1.x tlogs without ``EXTENDED_SYS_STATE``)
 ``wn_mps we_mps wd_mps``  wind NED (velocity of the air), m/s; NaN where the log has no estimate
 ``boot_s``         the autopilot's own clock (s since its boot) at the sample; NaN when unknown. It is
                    the clock PX4's ``.ulg``, ArduPilot's ``.bin`` and the MAVLink ``time_boot_ms``
@@ -70,6 +73,7 @@ STATE_COLUMNS = [
     "ad_mps2",
     "mode",
     "armed",
+    "landed",
     *WIND,
     "boot_s",
 ]

@@ -11,9 +11,12 @@ different rates agree exactly.
 Height faults of real logs (issue 14) are the estimator's, not the vehicle's: with ``ekf_offset_m``
 the estimator's height runs a growing offset below the truth (an EKF that sits metres below home
 on the ground), with ``ekf_excursion`` it dips below the truth and back (a hard landing), with
-``glitch`` it jumps 40 m below the ground. The estimator streams (local/global position, EKF,
-POS/CTUN) carry the fault; the barometer, GPS and rangefinder streams carry the truth with small
-deterministic noise (``baro_noise_m``, ``gps_noise_m``). Home is ``d = 0`` at ``HOME_AMSL_M``.
+``ekf_error_knots`` it follows any piecewise-linear error (the ArduCopter 3.4 ``.tlog``'s estimator
+sinking on for half a minute after its hard landing), with ``glitch`` it jumps 40 m below the
+ground. The estimator streams (local/global position, EKF, POS/CTUN) carry the fault; the
+barometer, GPS and rangefinder streams carry the truth with small deterministic noise
+(``baro_noise_m``, ``gps_noise_m``), the GPS its own ``gps_error_knots`` too. Home is ``d = 0`` at
+``HOME_AMSL_M``; ``disarm_s`` keeps a landed vehicle armed on the ground.
 
 Writers: :func:`write_tlog` (pymavlink-packed frames with the tlog's 8-byte big-endian UNIX-µs
 prefix), :func:`write_ulog` (PX4 ULog packed by hand per the ULog spec: pyulog 1.3 can only
@@ -73,6 +76,19 @@ def _noise(t: np.ndarray, k: int) -> np.ndarray:
     return sum(np.sin(2 * np.pi * f * t + 2.3 * k + i) for i, f in enumerate((0.43, 1.37, 3.11))) / 3.0
 
 
+def _knots(t: np.ndarray, knots: tuple[tuple[float, float], ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(value, rate) of the piecewise-linear function through ``knots`` ((t_s, value), time-sorted),
+    0 before the first knot and after the last."""
+    kt = np.array([k[0] for k in knots], float)
+    kv = np.array([k[1] for k in knots], float)
+    inside = (t >= kt[0]) & (t <= kt[-1])
+    value = np.where(inside, np.interp(t, kt, kv), 0.0)
+    slope = np.diff(kv) / np.maximum(np.diff(kt), 1e-9)
+    seg = np.clip(np.searchsorted(kt, t, side="right") - 1, 0, max(len(slope) - 1, 0))
+    rate = np.where(inside & (len(slope) > 0), slope[seg] if len(slope) else 0.0, 0.0)
+    return value, rate
+
+
 @dataclass
 class SyntheticFlight:
     duration_s: float = 30.0
@@ -90,13 +106,19 @@ class SyntheticFlight:
     ekf_offset_m: tuple[float, float] | None = None
     # (t0_s, duration_s, depth_m): the estimator height dips depth below the truth and back (sin² shape)
     ekf_excursion: tuple[float, float, float] | None = None
+    # ((t_s, below_truth_m), ...): the estimator's error at knots, linear between them, 0 outside
+    ekf_error_knots: tuple[tuple[float, float], ...] | None = None
+    # the same for the GPS altitude (an estimator fusing GPS vertical velocity drifts with it)
+    gps_error_knots: tuple[tuple[float, float], ...] | None = None
+    # when a flight that starts on the ground disarms; None: 1 s after its last move (inf: never)
+    disarm_s: float | None = None
     baro_noise_m: float = 0.05
     gps_noise_m: float = 0.2
 
     @property
     def height_fault(self) -> bool:
         """The flight has an estimator height fault that other height sources reveal."""
-        return self.ekf_offset_m is not None or self.ekf_excursion is not None
+        return self.ekf_offset_m is not None or self.ekf_excursion is not None or self.ekf_error_knots is not None
 
     def estimator_error(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(Δd_m, Δvd_mps): how far the estimator's down position and down velocity run from the
@@ -115,6 +137,10 @@ class SyntheticFlight:
             phase = np.pi * np.clip(t - t0, 0.0, dur) / dur
             dd += np.where(inside, depth * np.sin(phase) ** 2, 0.0)
             dv += np.where(inside, depth * np.pi / dur * np.sin(2 * phase), 0.0)
+        if self.ekf_error_knots is not None:
+            e, r = _knots(t, self.ekf_error_knots)
+            dd += e
+            dv += r
         return dd, dv
 
     def true_alt_m(self, t: np.ndarray) -> np.ndarray:
@@ -152,7 +178,9 @@ class SyntheticFlight:
         if abs(self.start_alt_m) > 1e-9 or self.probe is not None or not self.descents:
             return np.ones_like(t)
         armed = t >= min(t0 for t0, _, _ in self.descents) - 1.0
-        if abs(self.start_alt_m - sum(h for _, h, _ in self.descents)) < 1e-9:
+        if self.disarm_s is not None:
+            armed &= t < self.disarm_s
+        elif abs(self.start_alt_m - sum(h for _, h, _ in self.descents)) < 1e-9:
             armed &= t <= max(t0 + dur for t0, _, dur in self.descents) + 1.0
         return armed.astype(float)
 
@@ -178,6 +206,7 @@ class SyntheticFlight:
         e = np.cumsum(np.concatenate([[0.0], np.diff(t) * ve[1:]]))
         dd, dv = self.estimator_error(t)
         d, vd = d_true + dd, vd_true + dv
+        gps_err = _knots(t, self.gps_error_knots)[0] if self.gps_error_knots is not None else 0.0
         if self.glitch is not None:
             g0, gdur = self.glitch
             d = np.where((t >= g0) & (t < g0 + gdur), d + self.start_alt_m + 40.0, d)
@@ -202,7 +231,7 @@ class SyntheticFlight:
             "d_true": d_true,
             "vd_true": vd_true,
             "alt_baro": -d_true + self.baro_noise_m * _noise(t, 0),
-            "alt_gps": -d_true + self.gps_noise_m * _noise(t, 1),
+            "alt_gps": -d_true + self.gps_noise_m * _noise(t, 1) - gps_err,
             "alt_range": alt_range,
             "ad": ad,
             "q": q,
@@ -214,6 +243,8 @@ class SyntheticFlight:
             "fz": ad - G + 5 * amp * wobble(3),
         }
         out["armed"] = self.armed(t)
+        # the land detector: at home height and still (taking off and landing are in the air)
+        out["landed"] = ((-d_true < 0.05) & (np.abs(vd_true) < 0.05)).astype(float)
         # disarmed on the ground the motors stand still
         out["motors"] = np.column_stack([thrust + 0.2 * amp * wobble(4 + k) for k in range(4)]) * out["armed"][:, None]
         return out
@@ -224,8 +255,9 @@ class SyntheticFlight:
 TLOG_STREAMS = ("pos", "att", "imu", "servo", "heartbeat", "wind")
 # what a height-fault flight adds by default: the streams that show the truth, and the parameters
 TLOG_HEIGHT_STREAMS = ("global", "altitude", "baro", "gps", "params")
-# every stream write_tlog knows ("att_euler": ATTITUDE; "range": DISTANCE_SENSOR, downward)
-TLOG_ALL_STREAMS = (*TLOG_STREAMS, *TLOG_HEIGHT_STREAMS, "att_euler", "range")
+# every stream write_tlog knows ("att_euler": ATTITUDE; "range": DISTANCE_SENSOR, downward; "landed":
+# EXTENDED_SYS_STATE at 1 Hz)
+TLOG_ALL_STREAMS = (*TLOG_STREAMS, *TLOG_HEIGHT_STREAMS, "att_euler", "range", "landed")
 _SENSOR_RATES_HZ = {"altitude": 10.0, "baro": 10.0, "gps": 5.0, "range": 10.0}
 
 
@@ -259,8 +291,8 @@ def write_tlog(
     when the flight has a height fault. "pos" is LOCAL_POSITION_NED, "global" GLOBAL_POSITION_INT
     (leave out "pos" for a log whose position is the global one, as ArduCopter 3.x streamed),
     "altitude" ALTITUDE, "baro" SCALED_PRESSURE, "gps" GPS_RAW_INT (the first fix is a no-fix),
-    "range" DISTANCE_SENSOR, "params" PARAM_VALUE of ``params`` (default ``PX4_PARAMS`` /
-    ``ARDUPILOT_PARAMS``) before the first sample."""
+    "range" DISTANCE_SENSOR, "landed" EXTENDED_SYS_STATE, "params" PARAM_VALUE of ``params`` (default
+    ``PX4_PARAMS`` / ``ARDUPILOT_PARAMS``) before the first sample."""
     from pymavlink.dialects.v20 import common as mavlink
 
     if streams is None:
@@ -310,6 +342,9 @@ def write_tlog(
             )
             if gcs_heartbeats:
                 add(ts + gcs.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(gcs))
+            if "landed" in streams:
+                landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND if s["landed"][i] else mavlink.MAV_LANDED_STATE_IN_AIR
+                add(ts + mav.extended_sys_state_encode(0, landed_state).pack(mav))
             if "wind" in streams:
                 add(ts + mav.wind_cov_encode(ms * 1000, wind[0], wind[1], wind[2], 0, 0, 0, 0, 0).pack(mav))
         if "pos" in streams:

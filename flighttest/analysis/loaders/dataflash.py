@@ -12,7 +12,8 @@ centidegree attitudes arrive in degrees and ``Lat``/``Lng`` in degrees. What is 
   ``NKQ`` / ``NKQ1`` (EKF2). Logs that leave ATT out (a log-bitmask choice) still have attitude.
 - body rates and specific force: ``IMU`` (first instance) ``GyrX..Z`` rad/s, ``AccX..Z`` m/s², FRD.
 - motors: ``RCOU`` ``C1..C8`` PWM µs → (µs − 1000)/1000; channels never non-zero dropped.
-- mode: ``MODE.ModeNum`` → ArduCopter mode name; armed: ``ARM.ArmState``, else ``EV`` ids 10/11.
+- mode: ``MODE.ModeNum`` → ArduCopter mode name; armed: ``ARM.ArmState``, else ``EV`` ids 10/11;
+  landed: ``EV`` ids 18 (``LAND_COMPLETE``) → 1 and 28 (``NOT_LANDED``) → 0, the land detector's changes.
 - wind: ``XKF2`` ``VWN VWE`` (m/s, velocity of the air) when present.
 - heights (up-positive m; the position's own first): ``XKF1.PD`` / ``NKF1.PD`` (negated, EKF origin,
   home-relative), ``POS.RelHomeAlt`` (home-relative) and ``POS.Alt`` (AMSL), ``CTUN.Alt`` (the
@@ -57,6 +58,7 @@ from flighttest.model.frames import EARTH_RADIUS_M, quat_from_euler
 MAX_GAP_S = 1.0
 DF_MAGIC = b"\xa3\x95"
 EV_ARMED, EV_DISARMED = 10, 11
+EV_LAND_COMPLETE, EV_NOT_LANDED = 18, 28
 
 WANTED = {
     "XKF1": ["TimeUS", "C", "PN", "PE", "PD", "VN", "VE", "VD"],
@@ -301,6 +303,11 @@ def load_dataflash(path: Path) -> FlightLog:
             cols["armed"] = resample(
                 ev["TimeUS"][sel] / 1e6, (ev["Id"][sel] == EV_ARMED).astype(float), t, 1e9, hold=True
             )
+    if (ev := msgs.get("EV")) is not None:
+        sel = np.isin(ev["Id"], [EV_LAND_COMPLETE, EV_NOT_LANDED])
+        if sel.any():
+            landed = (ev["Id"][sel] == EV_LAND_COMPLETE).astype(float)
+            cols["landed"] = resample(ev["TimeUS"][sel] / 1e6, landed, t, 1e9, hold=True)
     if (k2 := msgs.get("XKF2")) is not None:
         w = np.column_stack([k2["VWN"], k2["VWE"], np.zeros(len(k2["VWN"]))])
         wi = resample(k2["TimeUS"] / 1e6, w, t, 5.0)

@@ -13,6 +13,8 @@ Streams used, in order of preference (all MAVLink common, so PX4 and ArduPilot a
   ``SERVO_OUTPUT_RAW`` (µs). Channels that are never non-zero are dropped.
 - mode/armed: ``HEARTBEAT`` from the vehicle (not from a GCS), decoded by pymavlink's
   ``mode_string_v10``; armed = ``base_mode & MAV_MODE_FLAG_SAFETY_ARMED``.
+- landed: ``EXTENDED_SYS_STATE.landed_state`` (``MAV_LANDED_STATE``: 1 on the ground → 1; 2–4 in the
+  air, taking off, landing → 0; 0 undefined → NaN).
 - wind: ``WIND_COV`` (NED m/s), else ArduPilot's ``WIND`` (direction the wind comes *from*, deg,
   speed m/s → air velocity ``−speed·(cos, sin)``; its ``speed_z`` sign is undocumented, so wd = 0).
 
@@ -76,6 +78,7 @@ from flighttest.model.frames import EARTH_RADIUS_M, body_to_ned, quat_from_euler
 MAX_GAP_S = 1.0
 MAV_FRAME_BODY_FRD = 12
 MAV_TYPE_GCS = 6
+MAV_LANDED_STATE_ON_GROUND = 1
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # a downward-facing distance sensor
 GPS_FIX_TYPE_3D = 3
 BOOT_CLOCK_MAX_S = 1e9  # a "boot" clock beyond ~31 years is UNIX time
@@ -122,6 +125,7 @@ STREAMS = (
     "ACTUATOR_OUTPUT_STATUS",
     "SERVO_OUTPUT_RAW",
     "HEARTBEAT",
+    "EXTENDED_SYS_STATE",
     "WIND_COV",
     "WIND",
     "ALTITUDE",
@@ -338,6 +342,11 @@ def load_tlog(path: Path) -> FlightLog:
             cols["mode"] = resample(hb_t, names[inv.ravel()], t, 5.0, hold=True)
             armed = (f["base_mode"] & dialect.MAV_MODE_FLAG_SAFETY_ARMED) != 0
             cols["armed"] = resample(hb_t, armed.astype(float), t, 5.0, hold=True)
+
+    if (es := dec["EXTENDED_SYS_STATE"]) is not None:
+        ls = es.fields["landed_state"].astype(float)
+        landed = np.where(ls == MAV_LANDED_STATE_ON_GROUND, 1.0, np.where(ls > 0, 0.0, np.nan))
+        cols["landed"] = resample(when(es), landed, t, 5.0, hold=True)
 
     if (wc := dec["WIND_COV"]) is not None:
         f = wc.fields

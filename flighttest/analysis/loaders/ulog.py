@@ -8,6 +8,7 @@ PX4 topics used (each at its own rate, µs since boot):
 - ``sensor_combined``: ``accelerometer_m_s2[0..2]`` (specific force FRD);
 - ``actuator_motors``: ``control[i]`` (0..1), else ``actuator_outputs``: ``output[i]`` (PWM µs);
 - ``vehicle_status``: ``nav_state`` (PX4 navigation state → name), ``arming_state`` (2 = armed);
+- ``vehicle_land_detected``: ``landed`` (the state's ``landed``);
 - ``wind`` / ``wind_estimate``: ``windspeed_north/east`` (m/s; vertical wind 0);
 - ``vehicle_local_position_setpoint`` / ``trajectory_setpoint``: the setpoints table.
 
@@ -80,6 +81,7 @@ TOPICS = [
     "actuator_motors",
     "actuator_outputs",
     "vehicle_status",
+    "vehicle_land_detected",
     "wind",
     "wind_estimate",
     "vehicle_local_position_setpoint",
@@ -263,6 +265,8 @@ def load_ulog(path: Path) -> FlightLog:
             cols["mode"] = resample(ts[ok], names, t, 1e9, hold=True)
         if "arming_state" in vs:
             cols["armed"] = resample(ts, (vs["arming_state"] == ARMED).astype(float), t, 1e9, hold=True)
+    if (ld := _topic(ulog, "vehicle_land_detected")) is not None and "landed" in ld:
+        cols["landed"] = resample(ld["timestamp"] / 1e6, (ld["landed"] != 0).astype(float), t, 1e9, hold=True)
     wind = _topic(ulog, "wind") or _topic(ulog, "wind_estimate")
     if wind is not None and "windspeed_north" in wind:
         w = np.column_stack([wind["windspeed_north"], wind["windspeed_east"], np.zeros(len(wind["timestamp"]))])
