@@ -87,7 +87,11 @@ class ScriptedAutopilot:
     answer_s: float = 0.05  # how long a command takes to be acknowledged
     takeoff_speed_mps: float = 1.0
     land_speed_mps: float = 0.7
-    disarm_after_s: float = 0.5  # on the ground in Land, PX4 disarms after this
+    disarm_after_s: float = 0.5  # on the ground in Land, after a flight, PX4 disarms after this
+    # from the takeoff command until the vehicle climbs: PX4 SITL spools up and ramps for seconds (its land
+    # detector said airborne 1.8 s after the command, 5 cm up 4.2 s after: bench/RESULTS.md, issue 24)
+    spool_up_s: float = 1.0
+    preflight_disarm_s: float = 10.0  # armed on the ground without a takeoff: COM_DISARM_PRFLT / DISARM_DELAY
     position_gain_per_s: float = 1.0
     velocity_gain_per_s: float = 4.0
     max_accel_mps2: float = 10.0
@@ -119,6 +123,9 @@ class ScriptedAutopilot:
         if ardupilot:
             self.land_speed_mps = float(self.params.get("LAND_SPD_MS", self.land_speed_mps))
         self.taking_off = False
+        self.took_off = False  # since the last arm (PX4 disarms by itself after a landing only then)
+        self._armed_t = 0.0
+        self._takeoff_t = 0.0
         self.state = TelemetryState()
         self.on_posvel: list[Callable[[float], None]] = []
         self.on_attitude: list[Callable[[float], None]] = []
@@ -308,9 +315,19 @@ class ScriptedAutopilot:
                 self.mode = "BRAKE"
                 raise RuntimeError(f"{what}: denied (Arm: Mode not armable)")
             self.armed = True
+            self.took_off = False
+            self._armed_t = self.now()
             self._ground_since = None
 
         await self._command("arm", what, timeout_s, effect)
+
+    async def disarm(self, timeout_s: float, what: str = "disarm") -> None:
+        def effect() -> None:
+            if not (self.on_ground and abs(self.v_ned[2]) < 0.1):
+                raise RuntimeError(f"{what}: denied (not landed)")
+            self.armed = False
+
+        await self._command("disarm", what, timeout_s, effect)
 
     async def set_takeoff_altitude(self, alt_m: float, timeout_s: float, what: str = "set takeoff altitude") -> None:
         await self._command("set_takeoff_altitude", what, timeout_s, lambda: setattr(self, "takeoff_alt_m", alt_m))
@@ -322,6 +339,7 @@ class ScriptedAutopilot:
             self.hold_ned = np.array([self.p_ned[0], self.p_ned[1], -self.takeoff_alt_m])
             self.mode = self.takeoff_mode
             self.taking_off = True
+            self._takeoff_t = self.now()
 
         await self._command("takeoff", what, timeout_s, effect)
 
@@ -385,7 +403,8 @@ class ScriptedAutopilot:
             return sp.v_ned + kp * (sp.p_ned - self.p_ned), sp.a_ned
         v = kp * (self.hold_ned - self.p_ned)
         if self.taking_off:
-            v[2] = max(v[2], -self.takeoff_speed_mps)
+            spooled = self.now() >= self._takeoff_t + self.spool_up_s
+            v[2] = max(v[2], -self.takeoff_speed_mps) if spooled else 0.0
         elif self.mode == self.rules.land_mode:
             v[2] = self.land_speed_mps
         return v, zero
@@ -429,10 +448,17 @@ class ScriptedAutopilot:
                 self._ground_since = None
             else:
                 self._ground_since = now if self._ground_since is None else self._ground_since
-                if self.mode == self.rules.land_mode and now - self._ground_since >= self.disarm_after_s:
+                # PX4 disarms a landing by itself only after a flight; ArduCopter's LAND always does
+                after_flight = self.took_off or self.rules.name == ARDUPILOT
+                landed_s = now - self._ground_since
+                if self.mode == self.rules.land_mode and after_flight and landed_s >= self.disarm_after_s:
                     self.armed = False
+            if not self.took_off and now - self._armed_t >= self.preflight_disarm_s and not self.taking_off:
+                self.armed = False  # armed this long without a takeoff
         else:
             self._ground_since = None
+            if self.p_ned[2] < -0.1:
+                self.took_off = True
         if self.taking_off and abs(self.p_ned[2] - self.hold_ned[2]) < 0.1:
             self.taking_off = False
             self.mode = self.after_takeoff_mode
@@ -456,8 +482,9 @@ class ScriptedAutopilot:
             return
         if not self._reported_connected:
             self._report_connection(True)
+        climbing = self.taking_off and now >= self._takeoff_t + self.spool_up_s
         in_air = self.armed and not (self.p_ned[2] >= -0.05 and self._ground_since is not None) and (
-            self.p_ned[2] < -0.05 or self.taking_off)
+            self.p_ned[2] < -0.05 or climbing)
         st.in_air = in_air
         if now >= self._next_landed_t - 1e-9:
             self._next_landed_t = now + 1.0 / self.landed_state_hz

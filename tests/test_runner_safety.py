@@ -89,17 +89,24 @@ def test_a_vehicle_left_in_a_pilots_mode_is_refused_before_arming(tmp_path):
 
 
 @pytest.mark.parametrize("after_s", [0.25, 0.4, 0.6])
-def test_ctrl_c_just_after_the_takeoff_ends_landed_and_disarmed(tmp_path, after_s):
-    # the armed flag comes with the 1 Hz heartbeat: it still says "disarmed" while the vehicle climbs
+@pytest.mark.parametrize("spool_up_s", [1.0, 0.0])
+def test_ctrl_c_just_after_the_takeoff_ends_landed_and_disarmed(tmp_path, after_s, spool_up_s):
+    # the armed flag comes with the 1 Hz heartbeat: it still says "disarmed" while the vehicle spools up
+    # (PX4 SITL: seconds before it lifts, and it disarms by itself only after a flight) or already climbs
     def script(ap, runner):
         ap.after(lambda: bool(ap.heard("takeoff")), after_s, lambda: runner.interrupt("SIGINT"))
 
-    f = fly(tmp_path, script)
+    f = fly(tmp_path, script, spool_up_s=spool_up_s)
     rungs = f.ladder()
     assert rungs[-1] == ("DONE", "landed") and "vehicle on the ground" not in rungs[0][1]
-    assert not f.ap.armed and f.ap.p_ned[2] == 0.0
-    assert f.summary["final_armed"] is False
-    assert "land" in f.heard_after(f.t_of("abort"))
+    assert not f.ap.armed and f.ap.p_ned[2] == 0.0 and f.summary["final_armed"] is False
+    heard = f.heard_after(f.t_of("abort"))
+    assert "land" in heard
+    if spool_up_s > after_s:  # it never lifted: on the ground and armed, the ladder disarms it
+        assert not f.ap.took_off and heard[-1] == "disarm"
+        assert ("LAND", "on the ground, still armed: disarming") in rungs
+    else:
+        assert f.ap.took_off and "disarm" not in heard  # it landed and disarmed by itself
 
 
 def test_a_takeoff_refused_on_the_ground_still_lands_and_disarms(tmp_path):

@@ -9,6 +9,8 @@ still. A vehicle counts as on the ground only when, after the last arm or takeof
 - its landed state (EXTENDED_SYS_STATE) said "on the ground" for ``LANDED_HELD_S``.
 
 Before any arm or takeoff command was sent, a vehicle that does not report itself armed never left it.
+On the ground but armed (a takeoff stopped before the vehicle lifted: PX4 spools up for seconds and only
+disarms by itself after a flight), the abort ladder disarms it (``flighttest.flying.guard.AbortLadder``).
 """
 
 from __future__ import annotations
@@ -50,20 +52,32 @@ class GroundEvidence:
         self.t_command_done = t_s if self.t_command_done is None else max(self.t_command_done, t_s)
         self.commands_pending = max(self.commands_pending - 1, 0)
 
-    def on_ground(self, st: ReportedState, now_s: float) -> str | None:
-        """Why the vehicle is on the ground ("disarmed", "landed state on ground", "never armed"), or
-        None while there is no such evidence."""
+    def disarmed(self, st: ReportedState, now_s: float) -> str | None:
+        """Why the vehicle is disarmed on the ground ("disarmed", "never armed"), or None without evidence."""
         if self.t_command_sent is None:
             return None if st.armed else "never armed"
-        if self.commands_pending or self.t_command_done is None or now_s < self.t_command_done:
-            return None  # an arm or takeoff may still be acted on
-        after = self.t_command_done
-        if (not st.armed and st.t_armed is not None and st.t_armed > after and st.armed_since_t is not None
-                and now_s - max(st.armed_since_t, after) >= DISARM_HELD_S
+        after = self._after(now_s)
+        if (after is not None and not st.armed and st.t_armed is not None and st.t_armed > after
+                and st.armed_since_t is not None and now_s - max(st.armed_since_t, after) >= DISARM_HELD_S
                 and st.landed_state not in AIRBORNE_STATES):  # fmt: skip
             return "disarmed"
-        if (st.landed_state == "ON_GROUND" and st.t_landed is not None and st.t_landed > after
+        return None
+
+    def on_ground(self, st: ReportedState, now_s: float) -> str | None:
+        """Why the vehicle is on the ground, armed or not ("disarmed", "never armed", "landed state on
+        ground"), or None while there is no such evidence."""
+        why = self.disarmed(st, now_s)
+        if why is not None:
+            return why
+        after = self._after(now_s)
+        if (after is not None and st.landed_state == "ON_GROUND" and st.t_landed is not None and st.t_landed > after
                 and st.landed_since_t is not None
                 and now_s - max(st.landed_since_t, after) >= LANDED_HELD_S):  # fmt: skip
             return "landed state on ground"
         return None
+
+    def _after(self, now_s: float) -> float | None:
+        """Evidence counts from here on; None while an arm or takeoff may still be acted on."""
+        if self.commands_pending or self.t_command_done is None or now_s < self.t_command_done:
+            return None
+        return self.t_command_done

@@ -476,6 +476,7 @@ class Rung(IntEnum):
 CMD_RECOVER = "recover"
 CMD_HOLD = "hold"
 CMD_LAND = "land"
+CMD_DISARM = "disarm"  # on the ground and still armed (the autopilot refuses it in the air)
 
 # PX4's modes in which a person flies the vehicle: seen during the ladder, flighttest stops sending anything
 # (README "Aborting by hand": the pilot took over); each autopilot's own are its rules'
@@ -491,6 +492,7 @@ class LadderTiming:
     hold_dwell_s: float = 2.0  # time in Hold before landing
     land_retry_s: float = 3.0  # re-send Land if the mode does not show it (or cannot be seen)
     land_min_resend_s: float = 0.5  # a newly stale link re-sends Land at once, but not more often than this
+    disarm_grace_s: float = 3.0  # on the ground and armed this long (on top of the evidence's 3 s): disarm
     link_give_up_s: float = 5.0  # link lost and nothing heard this long: the vehicle's failsafe is in charge
     land: bool = True  # False (--no-land): the ladder ends in Hold
 
@@ -502,7 +504,8 @@ class LadderObservation:
     region_ok: bool = True
     telemetry_fresh: bool = True
     mode: str = ""  # the autopilot's mode name (flighttest.flying.autopilot), e.g. "HOLD" / "BRAKE", "LAND"
-    landed: bool = False
+    landed: bool = False  # disarmed on the ground, on evidence (flighttest.flying.ground)
+    on_ground: bool = False  # on the ground, armed or not, on evidence
     link_ok: bool = True
     heard_age_s: float = 0.0  # since anything was last heard from the vehicle (a state sample)
 
@@ -520,6 +523,8 @@ class AbortLadder:
     _arrested_since: float | None = None
     _hold_seen_t: float | None = None
     _last_land_t: float = -math.inf
+    _last_disarm_t: float = -math.inf
+    _on_ground_since: float | None = None
     _land_watch: str = ""  # in Land: "" (telemetry fine), "telemetry stale" or "link lost"
     # in Land: the autopilot brings the vehicle down (or home) by itself and the ladder only watches; a mode
     # seen outside its own ones (fresh telemetry) for land_retry_s ends the watching: Land is sent then
@@ -613,6 +618,8 @@ class AbortLadder:
         elif self.rung == Rung.HOLD:
             if ob.landed:
                 return self._enter(t, Rung.DONE, "on the ground")
+            if ob.on_ground and tm.land:  # still armed on the ground: Land, then disarm
+                return self._enter(t, Rung.LAND, "on the ground, armed")
             if ob.mode == self.rules.hold_mode:
                 self._hold_seen_t = t if self._hold_seen_t is None else self._hold_seen_t
                 if not tm.land:
@@ -636,6 +643,18 @@ class AbortLadder:
         if ob.landed:
             return self._enter(t, Rung.DONE, "landed")
         watch = "link lost" if not ob.link_ok else "telemetry stale" if not ob.telemetry_fresh else ""
+        # on the ground and still armed: after a flight the autopilot disarms by itself (PX4: COM_DISARM_LAND,
+        # 2 s after its land detector); after none it does not (PX4 only after COM_DISARM_PRFLT, 10 s), so ask
+        if not ob.on_ground:
+            self._on_ground_since = None
+        elif self._on_ground_since is None:
+            self._on_ground_since = t
+        if ob.on_ground and not watch:
+            if t - self._on_ground_since < tm.disarm_grace_s or t - self._last_disarm_t < tm.land_retry_s:
+                return None  # nothing more to land
+            self._last_disarm_t = t
+            self.note(t, "on the ground, still armed: disarming")
+            return CMD_DISARM
         if self.following:
             if watch or ob.mode in self.rules.failsafe_modes:
                 self._strange_mode_since = None

@@ -39,6 +39,7 @@ class LadderHost(Protocol):
     def now(self) -> float: ...
     def event(self, name: str, **fields: Any) -> None: ...
     def on_ground(self) -> str | None: ...  # why the vehicle is on the ground, from evidence (flying.ground)
+    def disarmed(self) -> str | None: ...  # why it is disarmed on the ground, from evidence
 
 
 class LadderExecutor:
@@ -79,7 +80,7 @@ class LadderExecutor:
                 host.event("ladder", rung=rung, why=why, decided_t_s=round(t - self.t0_s(), 3))
             logged = len(self.ladder.history)
 
-        ground = None if self.ladder.done else host.on_ground()
+        ground = None if self.ladder.done else host.disarmed()
         if ground is not None:
             self.ladder.finish(host.now(), f"vehicle on the ground ({ground})")
         while not self.ladder.done:
@@ -94,7 +95,7 @@ class LadderExecutor:
                 # the region is ok only on a judged margin: none yet, or NaN (stale, non-finite), is unknown
                 t_s=now, vd_mps=st.vd_mps, region_ok=d is not None and d.margin_mps >= 0.0,
                 telemetry_fresh=fresh, mode=st.flight_mode,
-                landed=host.on_ground() is not None, link_ok=st.connected,
+                landed=host.disarmed() is not None, on_ground=host.on_ground() is not None, link_ok=st.connected,
                 heard_age_s=now - max(heard, t_start),
             )  # fmt: skip
             cmd = self.ladder.step(ob)
@@ -139,12 +140,14 @@ class LadderExecutor:
             self.log_phase(Phase.ABORT_LAND)
             await self.stop_recovery()
             self._send(cmd, lambda: self.link.land(COMMAND_TIMEOUT_S))
+        elif cmd == gd.CMD_DISARM:
+            self._send(cmd, lambda: self.link.disarm(COMMAND_TIMEOUT_S))
 
     def _send(self, cmd: str, command: Callable[[], Any]) -> None:
         """``command()`` in the background; the last of the same kind still unanswered is not doubled."""
         last = self._sends.get(cmd)
         if last is not None and not last.done():
-            what = "Land" if cmd == gd.CMD_LAND else "Hold"
+            what = {gd.CMD_LAND: "Land", gd.CMD_HOLD: "Hold", gd.CMD_DISARM: "disarm"}.get(cmd, cmd)
             self.host.event("ladder_command_skipped", command=cmd, why=f"the last {what} is still unanswered")
             return
         self._sends[cmd] = asyncio.create_task(self._sent(cmd, command))

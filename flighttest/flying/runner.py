@@ -207,8 +207,12 @@ class MissionRunner:
         self.abort_event.set()
 
     def on_ground(self) -> str | None:
-        """Why the vehicle is on the ground, from evidence (``flighttest.flying.ground``), or None."""
+        """Why the vehicle is on the ground, armed or not, from evidence (``flighttest.flying.ground``), or None."""
         return self.ground.on_ground(self.link.state, self.now()) if self.link is not None else "never connected"
+
+    def disarmed(self) -> str | None:
+        """Why the vehicle is disarmed on the ground, from evidence, or None."""
+        return self.ground.disarmed(self.link.state, self.now()) if self.link is not None else "never connected"
 
     @property
     def last_decision(self) -> gd.Decision | None:
@@ -647,7 +651,7 @@ class MissionRunner:
             self.set_phase(Phase.LAND)
             self.guard.armed = False  # landing below the floor is the point; stale/link still end it
             await link.land(10.0)
-            ok = await link.wait_for(lambda s: self.on_ground() is not None, max(H, 1.0) / 0.5 + 30.0)
+            ok = await link.wait_for(lambda s: self.disarmed() is not None, max(H, 1.0) / 0.5 + 30.0)
             if not ok:
                 raise RuntimeError("did not land and disarm in time")
             self.set_phase(Phase.LANDED)
