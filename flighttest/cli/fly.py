@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import dataclasses
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -19,7 +18,7 @@ from typing import Any
 
 from flighttest.console import console, err_console, print_json
 from flighttest.errors import FlighttestError
-from flighttest.flying.mission_scripts import MISSIONS, load_mission_module, search_dirs
+from flighttest.flying.mission_scripts import MISSIONS, search_dirs
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -58,7 +57,11 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
                    help="probe only: top descent speed of the sweep in m/s (default: the config's "
                         "max_descent_mps, else max_descent_ratio × the profile's w_allow)")  # fmt: skip
     p.add_argument("--wind-ned", type=float, nargs=3, metavar=("N", "E", "D"),
-                   help="wind in m/s NED for the guard when the vehicle reports none (default 0 0 0)")
+                   help="the wind measured on the ground, m/s NED (the velocity of the air): a prior the guard "
+                        "fuses with the autopilot's own estimate, if it reports one")  # fmt: skip
+    p.add_argument("--wind-sd", type=float, metavar="MPS",
+                   help="how far off --wind-ned may be at the vehicle's height, 1 σ in m/s (default 1.0: shear and "
+                        "gusts); the guard judges the worst air within 2.45 σ")  # fmt: skip
     p.add_argument("--sysid", type=int, metavar="N", help="system id of the autopilot to fly when several answer")
     p.add_argument("--yes", action="store_true", help="skip the go/no-go prompt")
     p.add_argument("--dry-run", action="store_true", help="connect, plan and check; do not arm")
@@ -88,132 +91,25 @@ def mission_defaults() -> dict[str, str]:
     return {"height": "by default " + ", ".join(heights), "descent": "by default " + ", ".join(descents)}
 
 
-def with_descent(cfg, descent_m: float | None, target: str):
-    """The config with ``--descent`` applied (``missions_config.DESCENT_KEYS``), refused for a trajectory
-    file (and a helix config flying a planned file): their descent is in the file."""
-    from flighttest.flying.missions_config import DESCENT_KEYS
-
-    if descent_m is None:
-        return cfg
-    if cfg.mission not in DESCENT_KEYS:
-        raise FlighttestError(
-            f"--descent does not apply to a trajectory file ({target}): its descent is in the file "
-            "(plan another with `flighttest plan ... --height M`, or fly a named mission)"
-        )
-    if cfg.plan.get("trajectory"):
-        raise FlighttestError(f"--descent does not apply: {cfg.path or 'the config'} flies the planned file "
-                              f"{cfg.plan['trajectory']!r}, whose descent is in the file")  # fmt: skip
-    return dataclasses.replace(cfg, plan={**cfg.plan, DESCENT_KEYS[cfg.mission]: float(descent_m)})
-
-
-def check_room(cfg) -> None:
-    """The mission's descent fits between its start height and the altitude floor (one line, exit 2,
-    before anything connects)."""
-    from flighttest.flying.missions_config import DESCENT_KEYS
-
-    fl = cfg.flight
-    if fl.start_height_m <= fl.min_alt_m:
-        raise FlighttestError(f"start height {fl.start_height_m:g} m must exceed the altitude floor {fl.min_alt_m:g} m")
-    key = DESCENT_KEYS.get(cfg.mission)
-    depth = cfg.plan.get(key) if key and not cfg.plan.get("trajectory") else None
-    room = fl.start_height_m - fl.min_alt_m
-    if depth is not None and depth > room + 1e-9:
-        raise FlighttestError(
-            f"the {cfg.mission} mission's descent of {depth:g} m from {fl.start_height_m:g} m goes below the "
-            f"altitude floor {fl.min_alt_m:g} m: at most {room:g} m (set --descent, --height or --min-alt)"
-        )
-
-
-def _check_numbers(args: argparse.Namespace) -> None:
-    """Every number of the command line within its physical range (``flighttest.inputs``), before
-    any file is read or anything connects."""
-    from flighttest import inputs as ip
-
-    checks = (("--height", args.height, ip.START_HEIGHT_M), ("--descent", args.descent, ip.HEIGHT_M),
-              ("--min-alt", args.min_alt, ip.ALTITUDE_FLOOR_M),
-              ("--geofence-radius", args.geofence_radius, ip.DISTANCE_M),
-              ("--max-descent-speed", args.max_descent_speed, ip.SPEED_MPS),
-              ("--sysid", args.sysid, ip.SYSID))  # fmt: skip
-    for name, value, rng in checks:
-        if value is not None:
-            rng.check(value, name)
-    for axis, w in zip("NED", args.wind_ned or ()):
-        ip.WIND_MPS.check(w, f"--wind-ned {axis}")
-
-
-def log_root(text: str | None) -> Path:
-    """The root folder of flight logs (``--log-dir``, else ``$FLIGHTTEST_LOG_DIR``, else ``logs``), checked
-    before anything connects: a folder there must be possible. Nothing is created here."""
-    import os
-
-    if text is None:
-        env = os.environ.get("FLIGHTTEST_LOG_DIR")
-        name, text = "$FLIGHTTEST_LOG_DIR", (env if env is not None else "logs")
-    else:
-        name = "--log-dir"
-    from flighttest.inputs import check_output_folder
-
-    return check_output_folder(text, name)
+# the options' names in messages (the library names its keywords: flighttest.flying.mission)
+OPTION_NAMES = {"height_m": "--height", "descent_m": "--descent", "min_alt_m": "--min-alt",
+                "geofence_radius_m": "--geofence-radius", "max_descent_mps": "--max-descent-speed",
+                "sysid": "--sysid", "wind_ned_mps": "--wind-ned", "wind_sd_mps": "--wind-sd",
+                "log_dir": "--log-dir"}  # fmt: skip
 
 
 def build_request(args: argparse.Namespace, mission: str | None = None, module: ModuleType | None = None):
-    """Profile, config (file + command-line overrides), trajectory → ``FlyRequest``."""
-    from flighttest.flying.link import check_connection, check_url
-    from flighttest.flying.missions_config import MissionConfig, load_mission_config
-    from flighttest.flying.runner import FlyRequest, check_duration
-    from flighttest.model.profiles import load_profile
-    from flighttest.model.trajectory import Trajectory
+    """The command line → ``flighttest.flying.mission.prepare_flight`` → ``FlyRequest``."""
+    from flighttest.flying.mission import prepare_flight
 
-    check_url(args.connect)
-    _check_numbers(args)
-    root = log_root(args.log_dir)
-    profile = load_profile(args.vehicle)
-    target = mission or args.target
-    if module is None and target in MISSIONS:
-        module = load_mission_module(target)
-    if module is not None:
-        cfg = load_mission_config(args.config or module.CONFIG)
-    elif args.config is not None:
-        cfg = load_mission_config(args.config)
-    else:
-        cfg = MissionConfig("file")
-    overrides = {}
-    if args.height is not None:
-        overrides["start_height_m"] = args.height
-    if args.min_alt is not None:
-        overrides["min_alt_m"] = args.min_alt
-    if args.geofence_radius is not None:
-        overrides["geofence_radius_m"] = args.geofence_radius
-    if args.no_land:
-        overrides["land"] = False
-    if overrides:
-        cfg = cfg.with_flight(**overrides)
-    if args.max_descent_speed is not None:
-        if cfg.mission != "probe":
-            raise FlighttestError("--max-descent-speed applies to the probe mission only")
-        cfg = dataclasses.replace(cfg, plan={**cfg.plan, "max_descent_mps": args.max_descent_speed})
-    cfg = with_descent(cfg, args.descent, str(target))
-    check_room(cfg)
-    if module is not None:
-        try:
-            traj = module.plan(profile, cfg)
-        except FlighttestError:
-            raise
-        except Exception as exc:  # the plan follows from the profile and the config alone: they are at fault
-            where = cfg.path or "its config"
-            raise FlighttestError(f"cannot plan the {cfg.mission} mission from {where}: {exc}") from None
-        name, traj_path = cfg.mission, ""
-    else:
-        traj = Trajectory.load(args.target, profile)
-        name, traj_path = Path(args.target).stem, str(args.target)
-    check_duration(traj, f"trajectory {traj_path}" if traj_path else f"the {name} mission's trajectory")
-    check_connection(args.connect)  # last: it may wait a moment for a host name to resolve
-    return FlyRequest(
-        connect=args.connect, profile=profile, config=cfg, trajectory=traj, mission_name=name,
-        trajectory_path=traj_path, sysid=args.sysid, yes=args.yes, dry_run=args.dry_run,
-        wind_ned_mps=tuple(args.wind_ned) if args.wind_ned else None,
-        log_root=root, show_panel=console.is_terminal and not args.json,
-        confirm=confirm_go, print_fn=(err_console.print if args.json else console.print),
+    return prepare_flight(
+        mission or args.target, connect=args.connect, vehicle=args.vehicle, config=args.config,
+        height_m=args.height, descent_m=args.descent, min_alt_m=args.min_alt,
+        geofence_radius_m=args.geofence_radius, max_descent_mps=args.max_descent_speed, land=not args.no_land,
+        wind_ned_mps=tuple(args.wind_ned) if args.wind_ned else None, wind_sd_mps=args.wind_sd,
+        sysid=args.sysid, log_dir=args.log_dir, yes=args.yes, dry_run=args.dry_run, confirm=confirm_go,
+        print_fn=(err_console.print if args.json else console.print),
+        show_panel=console.is_terminal and not args.json, module=module, names=OPTION_NAMES,
     )  # fmt: skip
 
 
