@@ -33,7 +33,7 @@ import math
 import os
 import re
 import stat
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,6 +68,16 @@ def shown(value: Any, limit: int = 60) -> str:
     """``repr`` of a bad value for an error line, cut short: a line must stay one line and short."""
     text = " ".join(repr(value).split())
     return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """``: did you mean 'x500'?`` for a name close to a known one (case aside), else ``""``."""
+    import difflib
+
+    known = list(known)
+    by_lower = {k.lower(): k for k in known}
+    close = by_lower.get(name.lower()) or next(iter(difflib.get_close_matches(name, known, n=1, cutoff=0.6)), None)
+    return f": did you mean {close!r}?" if close else ""
 
 
 @dataclass(frozen=True)

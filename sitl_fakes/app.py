@@ -211,8 +211,8 @@ def run(args: argparse.Namespace) -> int:
         _apply_params(vehicle, args.param)
         vehicle.telemetry = Telemetry(vehicle, cfg.telemetry_hz, truth_hz)
     stop = _Stop()
-    signal.signal(signal.SIGTERM, stop)
-    signal.signal(signal.SIGINT, stop)
+    for sig in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):  # SIGHUP: the shell that started it closed
+        signal.signal(sig, stop)
     print(f"connect: udpout://127.0.0.1:{link.port}", flush=True)
     t = cfg.truth
     personality = " (ardupilot)" if args.autopilot == "ardupilot" else ""  # PX4's lines stay as they were
@@ -235,7 +235,14 @@ def run(args: argparse.Namespace) -> int:
         vehicle.event("event", f"stop ({stop.reason or 'end'})")
         log.close()
         link.close()
+        why = STOP_WHY.get(stop.reason, stop.reason or "an error")
+        print(f"sitl_fakes: stopped after {time.monotonic() - t0:.0f} s: {why}", file=sys.stderr, flush=True)
     return 0
+
+
+STOP_WHY = {"SIGHUP": "SIGHUP (the terminal or shell that started it closed; `nohup` or `setsid` keeps it running)",
+            "SIGINT": "SIGINT (Ctrl-C)", "SIGTERM": "SIGTERM (asked to stop)",
+            "duration reached": "--duration-s reached"}  # fmt: skip
 
 
 def _loop(vehicle: FakePx4, link: Link, log: TruthLog, dt: float, stop: _Stop, duration_s: float) -> None:

@@ -273,12 +273,23 @@ def test_the_mission_runner_refuses_an_endless_trajectory_before_resampling_it(t
     assert not (tmp_path / "logs").exists()
 
 
+@pytest.mark.parametrize(("url", "use"), [("udp://:14540", "udpin://0.0.0.0:14540"),
+                                          ("udp://0.0.0.0:14540", "udpin://0.0.0.0:14540"),
+                                          ("tcp://127.0.0.1:5760", "tcpout://127.0.0.1:5760")])  # fmt: skip
+def test_mavsdks_old_url_spellings_are_refused_at_once_with_the_one_to_use(url, use):
+    from flighttest.flying.link import check_url
+
+    with pytest.raises(Exception) as info:
+        check_url(url)
+    assert str(info.value).endswith(f"MAVSDK's old spelling: use {use}")
+
+
 def test_check_url_keeps_every_documented_url():
     from flighttest.flying.link import check_url
 
     for url in ("udpin://0.0.0.0:14540", "udpin://127.0.0.1:14540", "udpout://127.0.0.1:14580",
                 "udpout://localhost:14580", "tcpout://192.168.1.10:5760", "tcpin://0.0.0.0:5760",
-                "udp://:14540", "serial:///dev/ttyAMA0:921600", "serial:///dev/ttyUSB0:57600",
+                "serial:///dev/ttyAMA0:921600", "serial:///dev/ttyUSB0:57600",
                 "serial_flowcontrol:///dev/ttyTHS1:921600", "udpout://my-laptop.local:14550"):  # fmt: skip
         assert check_url(url) == url
 

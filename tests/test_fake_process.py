@@ -92,6 +92,18 @@ def test_sigterm_stops_cleanly_with_complete_log(tmp_path):
     assert (df.kind == "state").sum() > 50
 
 
+def test_the_fake_says_on_stderr_when_and_why_it_stops(tmp_path):
+    # a shell that closes sends SIGHUP: the fake used to vanish without a word
+    fake = FakeVehicle(truth_log=tmp_path / "t.csv").start()
+    time.sleep(0.5)
+    fake.proc.send_signal(signal.SIGHUP)
+    assert fake.proc.wait(5) == 0
+    last = fake.stderr_path.read_text().strip().splitlines()[-1]
+    assert last.startswith("sitl_fakes: stopped after ") and "SIGHUP (the terminal or shell" in last
+    assert pd.read_csv(fake.truth_log).detail.iloc[-1] == "stop (SIGHUP)"
+    fake.stop()
+
+
 def test_exits_when_its_parent_dies(tmp_path):
     script = textwrap.dedent(
         f"""

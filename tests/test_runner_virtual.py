@@ -253,7 +253,7 @@ def test_ardupilot_defaults_are_refused_before_arming_with_the_value_to_set(tmp_
     assert f.outcome.abort_reason.startswith("preflight failed: WP_ACC_Z: 1 m/s²")
     assert "set WP_ACC_Z to 1.5" in f.outcome.abort_reason
     assert "arm" not in [c for _, c in f.ap.commands]
-    checks = {c["name"]: c for c in json.loads((Path(f.outcome.log_dir) / "preflight.json").read_text())["checks"]}
+    checks = {c["name"]: c for c in f.summary["preflight"]["checks"]}
     assert checks["FS_GCS_ENABLE"]["status"] == "warn" and checks["MAV_GCS_SYSID"]["status"] == "warn"
     assert "set MAV_GCS_SYSID to 245" in checks["MAV_GCS_SYSID"]["requirement"]
     assert "COM_OF_LOSS_T" not in checks  # PX4's table is not asked of ArduPilot
@@ -330,3 +330,33 @@ def test_ardupilot_second_flight_on_the_same_vehicle_arms_from_guided(tmp_path):
     events = [json.loads(x) for x in (Path(outcomes[1].log_dir) / "events.jsonl").read_text().splitlines()]
     reset = next(e for e in events if e["event"] == "mode_reset")
     assert (reset["old"], reset["new"]) == ("LAND", "GUIDED")
+
+
+def test_without_a_terminal_a_flight_says_what_it_does(tmp_path):
+    said: list[object] = []
+    f = fly(tmp_path, request={"print_fn": said.append})
+    lines = [x.split("] ", 1)[1] for x in said if isinstance(x, str)]
+    assert lines == ["connected: preflight checks", "arming", "taking off",
+                     f"took off: climbing to {START_M:g} m in OFFBOARD", "settling at the start point",
+                     "descent started", "descent flown: settling at the end point", "landing",
+                     "landed and disarmed"]  # fmt: skip
+    assert f.outcome.outcome == "completed"
+
+
+def test_an_abort_is_said_with_its_rungs(tmp_path):
+    said: list[object] = []
+
+    def script(ap, runner):
+        ap.after(in_phase(runner, "stream"), 1.0, lambda: runner.interrupt("SIGINT"))
+
+    fly(tmp_path, script, request={"print_fn": said.append})
+    lines = [x.split("] ", 1)[1] for x in said if isinstance(x, str)]
+    i = lines.index("ABORT in stream: SIGINT from the operator")
+    assert lines[i + 1:] == ["abort ladder: recover", "abort ladder: hold", "abort ladder: land"]
+
+
+def test_a_run_refused_for_want_of_a_terminal_leaves_no_flight_folder(tmp_path):
+    f = fly(tmp_path, request={"yes": False})  # pytest's stdin is no terminal
+    assert f.outcome.outcome == "refused" and f.outcome.abort_reason.startswith("no terminal to confirm arming")
+    assert f.outcome.log_dir is None and list(tmp_path.iterdir()) == []
+    assert f.summary["preflight"]["ok"] is True and "arm" not in [c for _, c in f.ap.commands]

@@ -68,6 +68,9 @@ def fly(tmp_path: Path, script: Callable[[ScriptedAutopilot, MissionRunner], Non
     if script is not None:
         script(ap, runner)
     outcome = run_virtual(runner.run())
+    if outcome.outcome == "refused":  # never armed: no folder, the preflight in the outcome
+        assert outcome.log_dir is None and not any(Path(tmp_path).iterdir())
+        return Flight(outcome, ap, runner, [], outcome.summary())
     log_dir = Path(outcome.log_dir)
     for name in LOG_FILES:
         assert (log_dir / name).is_file() or (name == "summary.json" and not summary_expected), name

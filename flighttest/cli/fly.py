@@ -130,7 +130,7 @@ def run_request(req, as_json: bool) -> int:
     summary = out.summary()
     if as_json:
         print_json({**summary, "error": out.abort_reason} if out.outcome == Outcome.REFUSED else summary)
-    else:
+    elif out.outcome != Outcome.REFUSED:  # a refusal is the one error line below, on stderr
         colour = {Outcome.COMPLETED: "green", Outcome.DRY_RUN: "green", Outcome.PROBE_STOPPED: "yellow"}.get(
             out.outcome, "red")
         line = f"[{colour}]{out.outcome}[/]"

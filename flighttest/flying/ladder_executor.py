@@ -38,6 +38,7 @@ class LadderHost(Protocol):
 
     def now(self) -> float: ...
     def event(self, name: str, **fields: Any) -> None: ...
+    def progress(self, text: str) -> None: ...
     def on_ground(self) -> str | None: ...  # why the vehicle is on the ground, from evidence (flying.ground)
     def disarmed(self) -> str | None: ...  # why it is disarmed on the ground, from evidence
 
@@ -168,6 +169,7 @@ class LadderExecutor:
         if phase != self.phase:
             self.phase = phase
             self.host.event("phase", phase=phase, nominal_phase=self.host.phase)
+            self.host.progress(f"abort ladder: {phase.removeprefix('abort_')}")
 
     async def stop_recovery(self) -> None:
         if self._recovery is not None:

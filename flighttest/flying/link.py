@@ -38,7 +38,9 @@ from flighttest.flying.autopilot import (
 
 # what the streamer calls on MAVSDK's synchronous offboard plugin (VehicleLink.offboard_setters)
 OFFBOARD_SETTERS = ("set_position_velocity_acceleration_ned", "set_velocity_ned")
-URL_RE = re.compile(r"^(udpin|udpout|tcpin|tcpout|udp|tcp|serial|serial_flowcontrol)://.+$")
+URL_RE = re.compile(r"^(udpin|udpout|tcpin|tcpout|serial|serial_flowcontrol)://.+$")
+# MAVSDK 4's deprecated spellings: refused at once with the one to use (MAVSDK would take them, after a warning)
+DEPRECATED_SCHEMES = {"udp": "udpin", "tcp": "tcpout"}
 URL_HELP = "udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT or serial:///dev/ttyUSB0:57600"
 # flighttest's own identity as a ground station: MAVSDK's 245 (component 190), not QGroundControl's 255, so
 # both can share a link (mavlink-router) without answering for each other. ArduPilot's GCS failsafe watches
@@ -53,7 +55,7 @@ SYS_STATUS_MSG_ID = 1
 # streams nothing unless asked (../shared/ardupilot_sitl: without it MAVSDK's health stayed false)
 SYS_STATUS_HZ = 2.0
 AUTOPILOT_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
-LISTEN_SCHEMES = ("udpin", "tcpin", "udp")  # MAVSDK's deprecated udp:// listens, tcp:// connects
+LISTEN_SCHEMES = ("udpin", "tcpin")
 SERIAL_SCHEMES = ("serial", "serial_flowcontrol")
 MAX_BAUD = 20_000_000  # beyond any UART a flight controller has (PX4 tops out at 3 Mbit/s)
 RESOLVE_TIMEOUT_S = 3.0
@@ -73,7 +75,7 @@ def _split_host_port(url: str, rest: str) -> tuple[str, int]:
         raise _bad(url, f"port {port!r} is not a number")
     if not 1 <= int(port) <= 65535:
         raise _bad(url, f"port {int(port)} is out of range (1..65535)")
-    if not host and not url.startswith("udp://"):  # MAVSDK's old udp://:PORT = every interface
+    if not host:
         raise _bad(url, "a host is required (udpin://0.0.0.0:PORT listens on every interface)")
     return host or "0.0.0.0", int(port)
 
@@ -96,6 +98,13 @@ def check_url(url: str) -> str:
     # a pasted newline or tab would reach MAVSDK as part of the device name or port
     if any(c.isspace() or not c.isprintable() for c in url):
         raise _bad(url, "it contains whitespace or a control character")
+    scheme = url.partition("://")[0]
+    if scheme in DEPRECATED_SCHEMES:
+        new = DEPRECATED_SCHEMES[scheme]
+        rest = url.partition("://")[2]
+        if new == "udpin" and rest.startswith(":"):
+            rest = "0.0.0.0" + rest
+        raise _bad(url, f"{scheme}:// is MAVSDK's old spelling: use {new}://{rest}")
     if not URL_RE.match(url):
         raise _bad(url, f"expected {URL_HELP}")
     scheme, _, rest = url.partition("://")

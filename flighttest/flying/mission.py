@@ -79,8 +79,13 @@ def prepare_flight(
     target = str(target)
     if module is None and target in MISSIONS:
         module = load_mission_module(target)
+    if module is None:
+        _check_trajectory_target(target)
     if module is not None:
         cfg = load_mission_config(config or module.CONFIG)
+        mission = target if target in MISSIONS else cfg.mission
+        if config is not None and cfg.mission != mission:
+            raise FlighttestError(f"{config} is the {cfg.mission} mission's config, not the {mission} mission's")
     elif config is not None:
         cfg = load_mission_config(config)
     else:
@@ -137,6 +142,20 @@ def fly_mission(target: str | Path, **kwargs: Any) -> FlightOutcome:
 
 
 # -- the checks --------------------------------------------------------------------------------------
+
+
+def _check_trajectory_target(target: str) -> None:
+    """A target that is no mission must be a trajectory file: a name that is neither says what would be."""
+    from flighttest.inputs import did_you_mean
+    from flighttest.model.trajectory import file_paths
+
+    csv_path, json_path = file_paths(target)
+    if csv_path.exists() or json_path.exists():
+        return
+    raise FlighttestError(
+        f"trajectory file not found: {csv_path}, and no mission {target!r}{did_you_mean(target, MISSIONS)} "
+        f"(missions: {', '.join(MISSIONS)}; a trajectory file is NAME.csv with NAME.json beside it)"
+    )
 
 
 def _check_numbers(names: Mapping[str, str], **values: Any) -> None:

@@ -71,6 +71,11 @@ SETTLE_WINDOW_S = 1.0  # … or its position moved that slowly over this window 
 # a trajectory longer than this outlasts the battery (flighttest.inputs): a damaged file, not a flight,
 # and resampling it at the setpoint rate could need more memory than there is
 MAX_TRAJECTORY_S = MAX_DURATION_S
+# the progress line at the start of each phase (the climb's and the second settle's are made where they start)
+PROGRESS = {Phase.PREFLIGHT: "connected: preflight checks", Phase.ARM: "arming",
+            Phase.TAKEOFF: "taking off", Phase.SETTLE: "settling at the start point",
+            Phase.STREAM: "descent started", Phase.LAND: "landing", Phase.LANDED: "landed and disarmed",
+            Phase.HOLD: "holding at the end point"}  # fmt: skip
 # while PX4 flies itself (its takeoff, its Land) telemetry missing longer than this starts the ladder
 LAND_STALE_S = gd.AUTOPILOT_STALE_S
 PARAMS_TIMEOUT_S = 3.0  # the preflight parameter snapshot may delay a flight by at most this
@@ -153,6 +158,7 @@ class MissionRunner:
         self._signals = 0
         self.connected = False  # an autopilot answered: from then on the log folder is kept
         self.panel = None  # the live panel while flying from a terminal
+        self.preflight: PreflightResult | None = None
 
     # -- helpers -------------------------------------------------------------------------------------
     @staticmethod
@@ -169,8 +175,21 @@ class MissionRunner:
             self.log.event(self.now(), name, **fields)
 
     def set_phase(self, phase: str) -> None:
+        settled_before = self.phase == Phase.STREAM
         self.phase = phase
         self.event("phase", phase=phase)
+        text = PROGRESS.get(phase)
+        if phase == Phase.SETTLE and settled_before:
+            text = "descent flown: settling at the end point"
+        if phase == Phase.CLIMB:
+            text = f"took off: climbing to {self.fl.start_height_m:g} m in {self.rules.offboard_mode}"
+        if text:
+            self.progress(text)
+
+    def progress(self, text: str) -> None:
+        """A line of what the flight is doing, where no live panel shows it (no terminal, ``--json``)."""
+        if self.panel is None and self.log is not None:
+            self.req.print_fn(f"[{self.now() - self.log.t0_mono:6.1f} s] {text}")
 
     def abort(self, reason: str, first: gd.Rung = gd.Rung.RECOVER, verdict: str = "") -> None:
         """Start (or join) the abort ladder; safe to call from any callback on the loop."""
@@ -188,6 +207,7 @@ class MissionRunner:
         self.abort_verdict = verdict
         self.guard.armed = False  # decisions keep being logged; the ladder is in charge now
         self.event("abort", reason=reason, rung=self.ladder.rung.name, phase=self.phase)
+        self.progress(f"ABORT in {self.phase}: {reason}")
 
     def takeover(self, reason: str, mode: str) -> None:
         """A pilot has the sticks (``mode``): the run ends here and nothing more is sent, queued or not."""
@@ -289,8 +309,9 @@ class MissionRunner:
             if outcome is None:  # cancelled: still leave a summary
                 outcome = self._outcome(Outcome.ABORTED, self.ladder.reason or "internal error")
             self.event("end", outcome=outcome.outcome, reason=outcome.abort_reason)
-            if not self.connected:
-                # nothing answered, nothing flew: no folder (an empty .tlog would only break `analyse logs/`)
+            if not self.connected or outcome.outcome == Outcome.REFUSED:
+                # never armed: no flight, so no flight folder (`analyse logs/` would list it as one); a refused
+                # preflight travels in the outcome (summary "preflight") and was printed
                 self.log.discard()
                 outcome.log_dir = None
             else:
@@ -340,6 +361,8 @@ class MissionRunner:
                                for t, r, w in self.ladder.history]  # fmt: skip
         if self.abort_verdict:
             extra["abort_verdict"] = self.abort_verdict
+        if self.preflight is not None:
+            extra["preflight"] = self.preflight.to_dict()
         return FlightOutcome(outcome, reason, self.watch.descent_time_s, str(self.log.dir), extra)
 
     async def _run_linked(self) -> FlightOutcome:
@@ -542,6 +565,7 @@ class MissionRunner:
                                     self.fl.geofence_radius_m, ab.recovery_lateral_mps * ab.recovery_s,
                                     self.cfg.guard.observe_region)  # fmt: skip
         pre = PreflightResult(checks)
+        self.preflight = pre
         try:
             self.log.write_preflight({**pre.to_dict(), "params": params, "trajectory": stats.__dict__})
         except OSError as exc:  # before arming: a flight whose log cannot be written does not start

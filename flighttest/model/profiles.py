@@ -31,6 +31,7 @@ from flighttest.inputs import (
     Range,
     check_input_file,
     check_text,
+    did_you_mean,
     shown,
 )
 from flighttest.model import aero
@@ -405,7 +406,7 @@ def load_profile(name_or_path: str | Path) -> VehicleProfile:
     cands = _candidates()
     if s not in cands:
         known = ", ".join(sorted(cands)) or "none"
-        raise FlighttestError(f"unknown vehicle {shown(s)} (known: {known})")
+        raise FlighttestError(f"unknown vehicle {shown(s)}{did_you_mean(s, cands)} (known: {known})")
     return load_profile_file(cands[s])
 
 

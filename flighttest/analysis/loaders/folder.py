@@ -161,6 +161,9 @@ def _clean_event(ev: dict, dropped: dict[str, int]) -> dict:
     out = {}
     for key, value in ev.items():
         key = str(key)
+        if isinstance(value, dict):  # a record of its own (the collector's per-generation max_ms)
+            out[key] = value
+            continue
         bad = not _finite(value) or (_NON_NEGATIVE_FIELD.search(key) is not None and value < 0)
         if _UNIT_FIELD.search(key) and value is not None and bad:
             dropped[key] = dropped.get(key, 0) + 1
