@@ -35,6 +35,7 @@ from flighttest.inputs import (
     shown,
 )
 from flighttest.model import aero
+from flighttest.model.drag import DragModel
 from flighttest.model.frames import GuardRegion
 from flighttest.tomlfile import read_toml
 
@@ -109,6 +110,8 @@ class VehicleProfile:
     vrs: VrsBoundary = field(default_factory=VrsBoundary)
     # the autopilot's setpoint-shaping limits the plans must fit within (None: no table, none apply)
     autopilot: AutopilotLimits | None = None
+    # the [drag] table: linear and quadratic per body axis, with its uncertainty (None: drag_n_per_mps alone)
+    drag_model: DragModel | None = None
     path: str = ""
 
     # -- derived quantities -------------------------------------------------------------------------
@@ -160,6 +163,17 @@ class VehicleProfile:
         """Largest downward acceleration with thrust ≥ min thrust (no flips), m/s²."""
         return aero.G_MPS2 - self.n_rotors * self.min_thrust_per_rotor_n / self.mass_kg
 
+    @property
+    def drag(self) -> DragModel | None:
+        """The drag across the thrust axis (``flighttest.model.drag``): the ``[drag]`` table, else
+        ``drag_n_per_mps`` as an assumed linear model; None for a profile with neither (no wind estimate)."""
+        if self.drag_model is not None:
+            return self.drag_model
+        if self.drag_n_per_mps > 0:
+            source = f"drag_n_per_mps {self.drag_n_per_mps:g}, assumed"
+            return DragModel.isotropic_linear(self.drag_n_per_mps, source=source)
+        return None
+
     def guard_region(self, w_allow_mps: float | None = None, margin_mps: float | None = None) -> GuardRegion:
         return GuardRegion(
             w_allow_mps=self.w_allow_mps if w_allow_mps is None else w_allow_mps,
@@ -189,6 +203,7 @@ class VehicleProfile:
             "cone_deg": self.vrs.cone_deg,
             "margin_mps": self.vrs.margin_mps,
             "autopilot": self.autopilot.summary() if self.autopilot is not None else None,
+            "drag": self.drag.to_table() if self.drag is not None else None,
         }
 
 
@@ -303,7 +318,7 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
     """Validate a parsed TOML document into a profile; any problem is one FlighttestError line."""
     if not isinstance(data, dict):
         raise FlighttestError(f"{path}: a vehicle profile must be a TOML table")
-    known = set(_TOP_REQUIRED) | set(_TOP_OPTIONAL) | {"vrs", "autopilot"}
+    known = set(_TOP_REQUIRED) | set(_TOP_OPTIONAL) | {"vrs", "autopilot", "drag"}
     for key in data:
         if key not in known:
             raise _bad(path, shown(key, 40).strip("'"), "is not a known profile field")
@@ -327,7 +342,8 @@ def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> V
     if vrs.eps_tws > vrs.eps_vrs:
         raise _bad(path, "vrs.eps_tws", "must not exceed vrs.eps_vrs (the TWS lies inside the VRS)")
     autopilot = _autopilot_from(data["autopilot"], path) if "autopilot" in data else None
-    prof = VehicleProfile(**kwargs, vrs=vrs, autopilot=autopilot, path=str(path))
+    drag = _drag_from(data["drag"], path) if "drag" in data else None
+    prof = VehicleProfile(**kwargs, vrs=vrs, autopilot=autopilot, drag_model=drag, path=str(path))
     if prof.thrust_to_weight <= 1.0:
         twr = prof.thrust_to_weight
         raise _bad(path, "max_thrust_per_rotor_n", f"cannot lift the vehicle (thrust/weight {twr:.2f})")
@@ -351,6 +367,30 @@ def _autopilot_from(raw: Any, path: Path | str) -> AutopilotLimits:
     if values["name"] not in AUTOPILOT_NAMES:
         raise _bad(path, "autopilot.name", f"must be one of {', '.join(AUTOPILOT_NAMES)} (got {shown(values['name'])})")
     return AutopilotLimits(**values)
+
+
+DRAG_N_PER_MPS = Range(0.0, 1000.0, "N·s/m")
+DRAG_N_PER_MPS2 = Range(0.0, 1000.0, "N·s²/m²")
+DRAG_REL_SD = Range(0.0, 10.0)
+
+
+def _drag_from(raw: Any, path: Path | str) -> DragModel:
+    """The ``[drag]`` table, each number in its range."""
+    if not isinstance(raw, dict):
+        raise _bad(path, "drag", "must be a table")
+    for key, value in raw.items():
+        kind = {"linear_n_per_mps": DRAG_N_PER_MPS, "quadratic_n_per_mps2": DRAG_N_PER_MPS2}.get(key)
+        if kind is not None:
+            for i, x in enumerate(value if isinstance(value, list) else [value]):
+                _check_value(path, f"drag.{key}[{i}]", x, kind)
+        elif key == "rel_sd":
+            _check_value(path, "drag.rel_sd", value, DRAG_REL_SD)
+        elif key == "source":
+            _check_value(path, "drag.source", value, _TEXT)
+    try:
+        return DragModel.from_table(raw)
+    except ValueError as exc:
+        raise FlighttestError(f"{path}: {exc}") from None
 
 
 def load_profile_file(path: Path | str) -> VehicleProfile:
@@ -420,6 +460,9 @@ def profile_to_dict(profile: VehicleProfile) -> dict[str, Any]:
     autopilot = d.pop("autopilot")
     if autopilot is not None:  # TOML has no null: a limit that does not apply is left out
         d["autopilot"] = {k: v for k, v in autopilot.items() if v is not None}
+    d.pop("drag_model")
+    if profile.drag_model is not None:
+        d["drag"] = profile.drag_model.to_table()
     return d
 
 
