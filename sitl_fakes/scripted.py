@@ -99,6 +99,11 @@ class ScriptedAutopilot:
     heartbeat_hz: float = 1.0  # armed and the mode reach the ground station with the heartbeat
     landed_state_hz: float = 10.0  # EXTENDED_SYS_STATE, as the link asks for it
     height_offset_m: float = 0.0  # the estimate's height reads this much high (on the ground too)
+    # the air: its wind (NED, m/s) and the drag it exerts, which the IMU feels across the thrust axis (the
+    # vehicle is level, so its body axes are NED's); deliberately not a profile's figures
+    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mass_kg: float = 2.0
+    drag_n_per_mps: float = 0.9
     rate_noise_rps: float = 0.01
     accel_noise_mps2: float = 0.05
     seed: int = 0
@@ -520,6 +525,8 @@ class ScriptedAutopilot:
         noise = self._rng.normal(size=6)
         st.rates_rps = tuple(float(x) for x in noise[:3] * self.rate_noise_rps)
         f = self.a_ned - np.array([0.0, 0.0, G_MPS2]) if self.armed else np.array([0.0, 0.0, -G_MPS2])
+        # thrust is along body z: across it the IMU feels the drag of the air alone
+        f[:2] = -self.drag_n_per_mps * (self.v_ned[:2] - np.asarray(self.wind_ned_mps[:2])) / self.mass_kg
         st.accel_frd_mps2 = tuple(float(x) for x in f + noise[3:] * self.accel_noise_mps2)
         st.t_imu = now
         st.count("imu", now)

@@ -103,8 +103,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     pi.add_argument(
         "--write-profile",
         action="store_true",
-        help="store the onset as w_allow (with provenance) in the user's copy of the profile",
+        help="store the onset as w_allow (with --drag: the drag model) in the user's copy of the profile",
     )
+    pi.add_argument("--drag", action="store_true",
+                    help="identify the airframe's drag from a calibration flight (`flighttest fly drag`) instead: "
+                         "linear and quadratic per body axis with its uncertainty, which flighttest's wind estimate "
+                         "needs")  # fmt: skip
     pi.add_argument("--json", action="store_true", help="machine-readable output")
     pi.set_defaults(func=cmd_identify)
 
@@ -585,6 +589,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
     profile = load_profile(args.vehicle)
     (args.log,) = _log_paths([args.log])
+    if args.drag:
+        return _identify_drag(args, profile)
     prior = profile.w_allow_mps
     try:
         with quiet_numerics():
@@ -627,4 +633,34 @@ def cmd_identify(args: argparse.Namespace) -> int:
         console.print(f"stored w_allow = {onset.w_onset_mps:.3f} m/s in {out['profile_written']}")
     else:
         console.print("not stored (add --write-profile to make plans and the guard use it)")
+    return 0
+
+
+def _identify_drag(args: argparse.Namespace, profile) -> int:
+    """``identify --drag``: the drag model of a calibration flight, or one line saying why not (exit 2)."""
+    from flighttest.analysis.batch import quiet_numerics
+    from flighttest.analysis.drag import identify_drag
+    from flighttest.analysis.loaders import load_log
+    from flighttest.model.profiles import write_drag
+
+    with quiet_numerics():
+        result = identify_drag(load_log(args.log), profile, str(args.log))
+    out = {"log": str(args.log), "vehicle": profile.name, **result.summary(), "profile_written": None,
+           "previous_drag": profile.drag.to_table() if profile.drag is not None else None}  # fmt: skip
+    if args.write_profile:
+        out["profile_written"] = str(write_drag(profile, result.model))
+    if args.json:
+        print_json(out)
+        return 0
+    m = result.model
+    console.print(
+        f"drag of {profile.name} from {args.log}: linear [bold]{m.linear_n_per_mps[0]:.3f}, {m.linear_n_per_mps[1]:.3f}"
+        f"[/] N/(m/s), quadratic [bold]{m.quadratic_n_per_mps2[0]:.4f}, {m.quadratic_n_per_mps2[1]:.4f}[/] N/(m/s)² "
+        f"(body x, y), ±{m.rel_sd:.0%}; {result.samples} samples up to {result.airspeed_max_mps:.1f} m/s of air; "
+        f"the wind during the calibration ({result.wind_ned_mps[0]:.2f}, {result.wind_ned_mps[1]:.2f}) m/s NED"
+    )
+    if out["profile_written"]:
+        console.print(f"stored in {out['profile_written']}")
+    else:
+        console.print("not stored (add --write-profile for flighttest's wind estimate to use it)")
     return 0

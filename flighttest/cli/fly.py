@@ -38,7 +38,7 @@ def missions_epilog() -> str:
 
 def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
     if target:
-        p.add_argument("target", metavar="probe|helix|vertical|TRAJECTORY_FILE",
+        p.add_argument("target", metavar="probe|helix|vertical|drag|TRAJECTORY_FILE",
                        help="a named mission (see below) or a trajectory file (NAME.csv + NAME.json)")  # fmt: skip
     p.add_argument("--connect", required=True, metavar="URL",
                    help="vehicle link: udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT, serial://DEV:BAUD")
@@ -85,6 +85,8 @@ def mission_defaults() -> dict[str, str]:
             heights.append(f"{mission}: its config does not load")
             continue
         heights.append(f"{mission} {cfg.flight.start_height_m:g} m")
+        if mission not in DESCENT_KEYS:  # the drag calibration flies level
+            continue
         depth = cfg.plan.get(DESCENT_KEYS[mission])
         what = " (sweep depth)" if mission == "probe" else ""
         descents.append(f"{mission} {depth:g} m{what}" if depth is not None else f"{mission}: its script's default")

@@ -33,7 +33,7 @@ from types import ModuleType
 
 from flighttest.errors import FlighttestError
 
-MISSIONS = {"probe": "vrs_probe", "helix": "helix_descent", "vertical": "vertical_descent"}
+MISSIONS = {"probe": "vrs_probe", "helix": "helix_descent", "vertical": "vertical_descent", "drag": "drag_calibration"}
 
 _SOURCE_ROOT = Path(__file__).resolve().parents[2]
 # the checkout's missions/: only when this flighttest is a source tree (site-packages has no pyproject.toml)

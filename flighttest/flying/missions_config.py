@@ -44,7 +44,7 @@ from flighttest.inputs import (
 )
 from flighttest.tomlfile import read_toml
 
-MISSION_KINDS = ("probe", "helix", "vertical", "file")
+MISSION_KINDS = ("probe", "helix", "vertical", "drag", "file")
 
 
 @dataclass(frozen=True)
@@ -198,6 +198,14 @@ _PLAN: dict[str, dict[str, Range | str]] = {
         "thrust_min_fraction": Range(0.0, 1.0, hi_open=True),
         "descent_max_mps": SPEED_MPS,
         "thrust_rate_max_mps3": Range(0.0, 1000.0, "m/s³", lo_open=True),
+    },
+    "drag": {
+        "speed_min_mps": Range(0.2, 10.0, "m/s"),
+        "speed_max_mps": Range(0.2, 10.0, "m/s"),
+        "n_speeds": Range(1, 10, integer=True),
+        "cruise_s": Range(0.5, 30.0, "s"),
+        "accel_mps2": Range(0.2, 5.0, "m/s²"),
+        "pause_s": Range(0.0, 10.0, "s"),
     },
     "file": {},  # a trajectory file is flown as planned
 }

@@ -84,3 +84,29 @@ class HelixPlanConfig:
     @classmethod
     def from_table(cls, plan: dict[str, Any]) -> HelixPlanConfig:
         return _from_table(cls, plan, "helix")
+
+
+@dataclass(frozen=True)
+class DragPlanConfig:
+    """The drag-calibration flight (``missions/drag_calibration.py``, ``flighttest.planner.calibration``)."""
+
+    speed_min_mps: float = 1.0
+    speed_max_mps: float = 3.0
+    n_speeds: int = 3
+    cruise_s: float = 2.0  # at speed, each way
+    accel_mps2: float = 1.5
+    pause_s: float = 1.0
+
+    @classmethod
+    def from_table(cls, plan: dict[str, Any]) -> DragPlanConfig:
+        p = _from_table(cls, plan, "drag")
+        if p.speed_min_mps > p.speed_max_mps:
+            raise FlighttestError("drag: speed_min_mps must not exceed speed_max_mps")
+        return p
+
+    @property
+    def speeds_mps(self) -> tuple[float, ...]:
+        if self.n_speeds == 1:
+            return (self.speed_max_mps,)
+        step = (self.speed_max_mps - self.speed_min_mps) / (self.n_speeds - 1)
+        return tuple(round(self.speed_min_mps + k * step, 3) for k in range(self.n_speeds))

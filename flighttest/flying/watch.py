@@ -26,6 +26,9 @@ from flighttest.flying.wind import WindEstimate, WindSources
 MODE_SETTLE_S = 0.1
 # from the arm command on, a pilot's mode is a takeover and the autopilot's own failsafe modes are followed
 ARMED_PHASES = frozenset({Phase.ARM, Phase.TAKEOFF, Phase.CLIMB, Phase.SETTLE, Phase.STREAM, Phase.LAND, Phase.HOLD})
+# the wind is estimated in flight, clear of the ground's reaction and the takeoff's ground effect
+WIND_PHASES = frozenset({Phase.TAKEOFF, Phase.CLIMB, Phase.SETTLE, Phase.STREAM, Phase.LAND, Phase.HOLD})
+WIND_MIN_HEIGHT_M = 0.5
 WHERE = {Phase.ARM: " while arming", Phase.TAKEOFF: " during the takeoff", Phase.LAND: " while landing",
          Phase.HOLD: " in the hold after the flight"}  # fmt: skip
 
@@ -115,7 +118,10 @@ class FlightWatch:
                            rule=timer.rule.describe())  # fmt: skip
 
     def on_imu(self, t: float) -> None:
-        st = self.host.link.state
+        host = self.host
+        st = host.link.state
+        if host.phase in WIND_PHASES and st.in_air and st.alt_m - host.ground_alt_m > WIND_MIN_HEIGHT_M:
+            host.wind.on_imu(t, st)  # across the thrust axis the IMU feels the air's drag: the wind
         for d in (self.guard.on_rates(t, *st.rates_rps), self.guard.on_vertical_accel(t, st.accel_frd_mps2[2])):
             if d is not None:
                 self._logged(d)

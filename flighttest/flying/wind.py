@@ -1,9 +1,12 @@
 """The wind the live guard judges with: every estimate flighttest has, each with its uncertainty, fused.
 
+- flighttest's own (``flighttest.model.wind_estimate.WindFilter``, from the IMU's specific force, the
+  attitude and the velocity with the profile's drag model), fed while the vehicle flies; it starts from
+  the operator's wind where there is one;
 - the operator's (``--wind-ned``, a measurement on the ground): a prior, with its standard deviation;
 - the autopilot's report (``WIND_COV``), used while fresh and only when it is an estimate: a report of
   exactly zero is what an estimator that does not estimate the wind sends, not a calm;
-- nothing known: calm, with ``unknown_sd_mps``.
+- nothing known: calm, with ``UNKNOWN_SD_MPS``.
 
 The fused wind is the inverse-variance mean, and its uncertainty carries the estimates' disagreement too
 (the variance of the mixture), so two sources that contradict each other widen the guard's margin rather
@@ -18,12 +21,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+from flighttest.model.drag import DragModel
+from flighttest.model.wind_estimate import WindFilter
+
 # a horizontal wind within this many σ of the estimate covers 95 % of a 2-D normal distribution
 WIND_COVERAGE_SIGMAS = 2.45
 WIND_REPORT_MAX_AGE_S = 2.0  # PX4 and the fake send WIND_COV at 2 Hz or more: older is not the wind now
 REPORT_SD_UNKNOWN_MPS = 1.0  # a report that gives no accuracy
 PRIOR_SD_MPS = 1.0  # a wind measured on the ground, at the vehicle's height: shear and gusts
 MIN_SD_MPS = 0.05  # no estimate of the wind is better than this
+UNKNOWN_SD_MPS = 1.0  # no drag model, no prior, no report: calm assumed, this unsure
+FRESH_STATE_S = 0.1  # a specific-force sample is paired only with a velocity and attitude this fresh
 
 
 @dataclass(frozen=True)
@@ -72,15 +80,58 @@ def autopilot_report(st: WindReport, now_s: float) -> WindEstimate | None:
     return WindEstimate(tuple(float(x) for x in w), sd, "autopilot")
 
 
+class FlightState(Protocol):
+    """What the filter is fed from (``flighttest.flying.link.TelemetryState``)."""
+
+    vn_mps: float
+    ve_mps: float
+    vd_mps: float
+    t_posvel: float | None
+    q: tuple[float, float, float, float]
+    t_att: float | None
+    accel_frd_mps2: tuple[float, float, float]
+
+
 @dataclass
 class WindSources:
     """The estimates available to one flight; ``current`` fuses those valid now."""
 
     prior: WindEstimate | None = None  # the operator's
-    unknown_sd_mps: float = 0.0  # nothing known: calm, this uncertain
+    estimator: WindFilter | None = None  # flighttest's own (None: the profile has no drag model)
+    unknown_sd_mps: float = UNKNOWN_SD_MPS
+
+    @classmethod
+    def for_flight(cls, drag: DragModel | None, mass_kg: float, prior: WindEstimate | None) -> WindSources:
+        estimator = None
+        if drag is not None:
+            estimator = WindFilter(drag, mass_kg)
+            if prior is not None:  # the filter starts from the operator's wind, so the prior counts once
+                estimator.wn_mps, estimator.we_mps = prior.ned_mps[0], prior.ned_mps[1]
+                estimator.p = [prior.sd_mps**2, 0.0, prior.sd_mps**2]
+        return cls(prior, estimator)
+
+    def on_imu(self, t_s: float, st: FlightState) -> None:
+        """A specific-force sample, while the vehicle flies (the caller judges that): into the filter,
+        paired with the latest velocity and attitude if both are fresh."""
+        f = self.estimator
+        if f is None or st.t_posvel is None or st.t_att is None:
+            return
+        if t_s - st.t_posvel > FRESH_STATE_S or t_s - st.t_att > FRESH_STATE_S:
+            return
+        f.update(t_s, (st.vn_mps, st.ve_mps, st.vd_mps), st.q, st.accel_frd_mps2[:2])
+
+    def own(self, now_s: float) -> WindEstimate | None:
+        """flighttest's estimate, its uncertainty grown by the time since its last sample."""
+        f = self.estimator
+        if f is None or not f.samples:
+            return None
+        age = max(now_s - (f.t_s or now_s), 0.0)
+        sd = math.sqrt(f.sd_mps**2 + f.process_sd_mps**2 * age)
+        return WindEstimate(f.wind_ned_mps, sd, "flighttest")
 
     def current(self, st: WindReport, now_s: float) -> WindEstimate:
-        found = [e for e in (autopilot_report(st, now_s), self.prior) if e is not None]
+        own = self.own(now_s)
+        found = [e for e in (own, autopilot_report(st, now_s), None if own else self.prior) if e is not None]
         if not found:
             return WindEstimate((0.0, 0.0, 0.0), self.unknown_sd_mps, "assumed calm")
         return fuse(found)

@@ -484,6 +484,32 @@ def plausible_w_allow_range(profile: VehicleProfile) -> tuple[float, float]:
     return max(profile.vrs.margin_mps, ONSET_MIN_OF_VRS_ENTRY * entry), ONSET_MAX_OF_TWS_ENTRY * core
 
 
+def write_drag(profile: VehicleProfile, drag: DragModel, target: Path | None = None) -> Path:
+    """Store an identified drag model in the user's copy of the profile (or in ``target``), its ``drag_n_per_mps``
+    (the feed-forward's one coefficient) set from it too."""
+    updated = replace(profile, drag_model=drag, drag_n_per_mps=round(drag.mean_linear_n_per_mps(), 4))
+    return _write_profile(profile, updated, target)
+
+
+def _write_profile(profile: VehicleProfile, updated: VehicleProfile, target: Path | None) -> Path:
+    """``updated`` written where a measured value of ``profile`` belongs: the user's copy (a shipped profile
+    is never edited), or ``target``; refused in one line where that is not a file one can write."""
+    if target is None:
+        src = Path(profile.path)
+        in_user_dir = src.parent.resolve() in {d.resolve() for d in user_dirs()}
+        target = src if in_user_dir else user_dirs()[0] / src.name
+    if target.exists() and not target.is_file():
+        raise FlighttestError(f"cannot write the profile to {target}: it is not a file")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = target.with_suffix(".toml.tmp")
+        tmp.write_text(tomli_w.dumps(profile_to_dict(updated)), encoding="utf-8")
+        tmp.replace(target)
+    except OSError as exc:
+        raise FlighttestError(f"cannot write the profile to {target} ({exc.strerror or exc})") from None
+    return target
+
+
 def write_w_allow(profile: VehicleProfile, w_allow_mps: float, source: str, target: Path | None = None) -> Path:
     """Store a measured ``w_allow`` (with its provenance) in the user's copy of the profile, or in ``target``.
     A value the model cannot explain for this vehicle (:func:`plausible_w_allow_range`) is refused here

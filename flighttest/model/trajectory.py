@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from flighttest.model.profiles import VehicleProfile
 
 FORMAT = "flighttest-trajectory/1"
-KINDS = ("planar", "helix", "vertical", "probe")
+KINDS = ("planar", "helix", "vertical", "probe", "calibration")
 REQUIRED_COLUMNS = (
     "t_s", "n_m", "e_m", "d_m",
     "vn_mps", "ve_mps", "vd_mps",
