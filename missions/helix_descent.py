@@ -21,6 +21,7 @@ from flighttest.model.trajectory import Trajectory
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.helix import solve_helix
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
+from flighttest.planner.wind_plans import helix_plans_for_winds, wind_speeds
 
 CONFIG = Path(__file__).with_suffix(".toml")
 
@@ -42,6 +43,27 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
     if not sol.success:
         raise FlighttestError(f"helix planner did not converge ({sol.result.status})")
     return helix_trajectory(sol, profile.name, profile.mass_kg, extra={"tracking_margin": dict(p)})
+
+
+def plans_for_wind(profile: VehicleProfile, cfg: MissionConfig, progress=lambda _: None) -> list[Trajectory]:
+    """Helices for winds up to ``max_wind_mps`` (along +east; the start hover turns the one it chooses)."""
+    p = cfg.plan
+    hp = HelixPlanConfig.from_table(p)
+    if hp.trajectory:
+        return []
+
+    def solve(speed_mps: float, radius_mps: float) -> Trajectory:
+        problem = helix_problem_for_flight(profile, height_m=hp.descent_m, radius_m=hp.radius_m,
+                                           margin=TrackingMargin.from_plan(p), n_intervals=hp.n_intervals,
+                                           n_coarse=hp.n_coarse, wind_ned_mps=(0.0, speed_mps, 0.0),
+                                           wind_radius_mps=radius_mps)  # fmt: skip
+        sol = solve_helix(problem)
+        if not sol.success:
+            raise FlighttestError(f"the planner did not converge ({sol.result.status})")
+        return helix_trajectory(sol, profile.name, profile.mass_kg, extra={"tracking_margin": dict(p)})
+
+    speeds = wind_speeds(cfg.flight.max_wind_mps, hp.wind_step_mps)
+    return helix_plans_for_winds(profile, dict(p), speeds, hp.wind_radius_mps, solve, progress)
 
 
 if __name__ == "__main__":

@@ -220,8 +220,11 @@ def test_a_zero_wind_report_does_not_replace_the_operators_tailwind(tmp_path):
     f = fly(tmp_path, script, traj=_downwind(3.0, 0.9, 4.0), request={"wind_ned_mps": (0.0, 3.0, 0.0),
                                                                       "wind_sd_mps": 0.1},
             wind_ned_mps=(0.0, 3.0, 0.0))  # fmt: skip
-    assert f.outcome.outcome == "aborted"
-    assert f.summary["abort_verdict"] in (gd.MARGINAL, gd.PREDICTED, gd.VIOLATION)
+    # the start hover judges the plan in that wind and refuses to descend (taking the report of zero for calm
+    # it would have flown straight down through its own wake)
+    assert f.outcome.outcome == "aborted" and f.summary["abort_verdict"] == "wind"
+    assert f.outcome.abort_reason.startswith("no plan clears the guard region in the wind at the start, ")
+    assert "stream" not in [e["phase"] for e in f.events if e["event"] == "phase"]
     # flighttest's own estimate, started from the operator's wind, never the autopilot's zero
     assert f.summary["wind_source"] == "flighttest" and f.summary["wind_ned_mps"][1] == pytest.approx(3.0, abs=0.3)
 

@@ -120,12 +120,16 @@ def prepare_flight(
         traj = Trajectory.load(target, profile)
         name, traj_path = Path(target).stem, target
     check_duration(traj, f"trajectory {traj_path}" if traj_path else f"the {name} mission's trajectory")
+    wind_plans = []
+    if module is not None and hasattr(module, "plans_for_wind") and not dry_run:
+        wind_plans = module.plans_for_wind(profile, cfg, print_fn)
     check_connection(connect)  # last: it may wait a moment for a host name to resolve
     return FlyRequest(
         connect=connect, profile=profile, config=cfg, trajectory=traj, mission_name=name,
         trajectory_path=traj_path, sysid=sysid, yes=yes, dry_run=dry_run,
         wind_ned_mps=tuple(float(x) for x in wind_ned_mps) if wind_ned_mps is not None else None,
         wind_sd_mps=wind_sd_mps, log_root=root, show_panel=show_panel, confirm=confirm, print_fn=print_fn,
+        wind_plans=wind_plans,
     )  # fmt: skip
 
 

@@ -67,6 +67,9 @@ class FlightConfig:
     # that trails a descent would otherwise turn its position error into a descent rate the guard aborts on
     catch_up_excess_mps: float = 0.1
     catch_up_floor_mps: float = 0.3
+    # the most wind a flight starts in (the preflight, from the operator's or the autopilot's wind; the start
+    # hover, from flighttest's own estimate): stronger, and a small multicopter's guard has no air to judge
+    max_wind_mps: float = 6.0
 
 
 @dataclass(frozen=True)
@@ -144,6 +147,7 @@ _RANGES: dict[str, Range] = {
     "feedforward_lead_s": Range(0.0, 1.0, _S),
     "catch_up_excess_mps": Range(0.0, 5.0, "m/s"),
     "catch_up_floor_mps": Range(0.0, 5.0, "m/s"),
+    "max_wind_mps": Range(0.0, 30.0, "m/s"),
     # [guard]
     "horizon_s": Range(0.0, 5.0, _S),
     "debounce_samples": Range(1, 100, integer=True),
@@ -198,6 +202,8 @@ _PLAN: dict[str, dict[str, Range | str]] = {
         "thrust_min_fraction": Range(0.0, 1.0, hi_open=True),
         "descent_max_mps": SPEED_MPS,
         "thrust_rate_max_mps3": Range(0.0, 1000.0, "m/s³", lo_open=True),
+        "wind_step_mps": Range(0.0, 30.0, "m/s"),
+        "wind_radius_mps": Range(0.0, 10.0, "m/s"),
     },
     "drag": {
         "speed_min_mps": Range(0.2, 10.0, "m/s"),

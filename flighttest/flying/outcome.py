@@ -74,6 +74,9 @@ class FlyRequest:
     show_panel: bool = False
     confirm: Callable[[PreflightResult], bool] | None = None  # go/no-go prompt
     print_fn: Callable[[Any], None] = print
+    # plans made ahead for winds (flighttest.planner.wind_plans): the start hover flies the fastest that the
+    # wind measured there leaves clear of the guard region, the trajectory above among them
+    wind_plans: list[Trajectory] = field(default_factory=list)
 
 
 @dataclass

@@ -80,6 +80,10 @@ class HelixPlanConfig:
     n_intervals: int = 60
     n_coarse: int = 30
     trajectory: str | None = None  # a planned file (NAME.csv + NAME.json beside the config), flown instead
+    # helices planned ahead for winds up to [flight] max_wind_mps in these steps (0: none, calm only), each
+    # clear of the guard region for any wind within wind_radius_mps of its own (flighttest.planner.wind_plans)
+    wind_step_mps: float = 2.0
+    wind_radius_mps: float = 0.5
 
     @classmethod
     def from_table(cls, plan: dict[str, Any]) -> HelixPlanConfig:

@@ -246,6 +246,16 @@ def vehicle_checks(
     return out
 
 
+def wind_check(speed_mps: float, sd_mps: float, source: str, max_wind_mps: float) -> Check:
+    """The wind known before takeoff (the operator's, the autopilot's) against ``max_wind_mps``; flighttest's
+    own estimate is judged again at the start hover (``flighttest.flying.wind.hover_check``)."""
+    value = f"{speed_mps:.1f} ± {sd_mps:.1f} m/s ({source})"
+    need = f"≤ max_wind_mps {max_wind_mps:g} m/s (judged again in the start hover from flighttest's estimate)"
+    if not math.isfinite(speed_mps):
+        return Check("wind", FAIL, "not a number", need)
+    return Check("wind", PASS if speed_mps <= max_wind_mps else FAIL, value, need)
+
+
 def mode_check(mode: str, rules: AutopilotRules) -> Check:
     """The mode the vehicle will arm in: from the arm on, a pilot's mode is a takeover and flighttest sends
     nothing more, so a flight never starts in one (nor in a mode the autopilot will not arm in)."""

@@ -49,11 +49,12 @@ from flighttest.flying.preflight import (
     trajectory_checks,
     trajectory_stats,
     vehicle_checks,
+    wind_check,
 )
 from flighttest.flying.settling import SettleCheck
 from flighttest.flying.streamer import Setpoint, SetpointStreamer
 from flighttest.flying.watch import FlightWatch
-from flighttest.flying.wind import PRIOR_SD_MPS, WindEstimate, WindSources
+from flighttest.flying.wind import PRIOR_SD_MPS, WindEstimate, WindSources, plan_margin_in_wind, rotate_plan
 from flighttest.inputs import MAX_DURATION_S
 from flighttest.model.trajectory import Trajectory
 
@@ -159,6 +160,7 @@ class MissionRunner:
         self.connected = False  # an autopilot answered: from then on the log folder is kept
         self.panel = None  # the live panel while flying from a terminal
         self.preflight: PreflightResult | None = None
+        self.ff = Feedforward()  # the autopilot's feed-forward corrections, once its parameters are read
 
     # -- helpers -------------------------------------------------------------------------------------
     @staticmethod
@@ -547,13 +549,15 @@ class MissionRunner:
             self.event("params", source=snap["source"], kept=len(snap["params"]), read=snap["params_read"], note=note)
         except OSError as exc:
             self.event("warning", what=f"params.json not written ({exc})")
-        self.stream_traj = for_autopilot(self.traj, self._feedforward(all_params, await link.autopilot_name()),
-                                         self.watch.wind_ned_mps())  # fmt: skip
+        self.ff = self._feedforward(all_params, await link.autopilot_name())
+        self.stream_traj = for_autopilot(self.traj, self.ff, self.watch.wind_ned_mps())
         accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
         stats = trajectory_stats(self.traj, self.limits.region, accel)
         ab = self.cfg.abort
         checks = vehicle_checks(link.state, self.now(), self.fl.telemetry_hz, self.fl.min_battery_percent)
         checks.append(mode_check(link.state.flight_mode, rules))
+        wind = self.watch.wind()
+        checks.append(wind_check(math.hypot(*wind.ned_mps[:2]), wind.sd_mps, wind.source, self.fl.max_wind_mps))
         checks.append(ground_height_check(link.state.alt_m))
         checks.append(disk_check(self.log.dir, self.traj.duration_s + 120.0, self.fl.telemetry_hz))
         if rules.name == ARDUPILOT:
@@ -634,7 +638,7 @@ class MissionRunner:
         self.set_phase(Phase.SETTLE)
         hold = Setpoint(*start, yaw_deg=yaw0)
         await self._settle(hold, fl.settle_s, fl.settle_s * 3 + 10.0, baseline=True)
-        if self.ladder.active:
+        if self.ladder.active or not self._plan_for_wind():
             return None
         self.origin = start
         last = self.traj.df.iloc[-1]
@@ -686,6 +690,45 @@ class MissionRunner:
             if not await link.wait_for(lambda s: s.flight_mode == rules.hold_mode, 5.0):
                 raise RuntimeError(f"{rules.hold_mode.title()} not confirmed after the flight (--no-land)")
         return self._outcome(Outcome.COMPLETED, None)
+
+    def _plan_for_wind(self) -> bool:
+        """In the start hover, the plan for the wind measured there (flighttest.flying.wind): the fastest of the
+        mission's own and those made ahead for winds (turned to this wind's direction) that the guard will
+        find clear of its region at the worst air the wind's uncertainty allows. None clear, or more wind than
+        ``max_wind_mps``: the ladder from Hold, before the descent."""
+        wind, prof = self.watch.wind(), self.req.profile
+        speed = math.hypot(*wind.ned_mps[:2])
+        said = f"{speed:.1f} ± {wind.sd_mps:.2f} m/s ({wind.source})"
+        if speed > self.fl.max_wind_mps:
+            self.abort(f"wind at the start {said}: above max_wind_mps {self.fl.max_wind_mps:g} m/s", gd.Rung.HOLD,
+                       "wind")  # fmt: skip
+            return False
+        heading = math.atan2(wind.ned_mps[1], wind.ned_mps[0])
+        cands = [self.req.trajectory]
+        for plan in self.req.wind_plans:  # made for the wind along +east
+            cands.append(rotate_plan(plan, heading - math.pi / 2))
+        judged = []
+        for c in cands:
+            margin, at = plan_margin_in_wind(c, self.limits.region, prof.drag, prof.mass_kg, wind)
+            planned = (c.meta.get("problem") or {}).get("wind_ned_mps") or [0.0, 0.0, 0.0]
+            judged.append((c, margin, {"planned_wind_mps": round(math.hypot(*planned[:2]), 2),
+                                       "duration_s": round(c.duration_s, 2), "margin_mps": round(margin, 3),
+                                       "at_s": round(at, 2)}))  # fmt: skip
+        clear = [(c, m) for c, m, _ in judged if m >= 0.0 or self.cfg.guard.observe_region]
+        self.event("wind_plan", **wind.describe(), candidates=[x for *_, x in judged])
+        if not clear:
+            best = max(judged, key=lambda j: j[1])
+            self.abort(f"no plan clears the guard region in the wind at the start, {said} (best margin "
+                       f"{best[1]:.2f} m/s)", gd.Rung.HOLD, "wind")  # fmt: skip
+            return False
+        chosen = min(clear, key=lambda cm: cm[0].duration_s)[0]
+        self.progress(f"wind {said}: flying the plan for {judged[cands.index(chosen)][2]['planned_wind_mps']:g} m/s")
+        if chosen is not self.req.trajectory:
+            check_duration(chosen)
+            self.traj = chosen.resample(self.fl.rate_hz)
+            self.log.save_trajectory(chosen)
+        self.stream_traj = for_autopilot(self.traj, self.ff, wind.ned_mps)
+        return True
 
     async def _ground_command(self, command: Awaitable[Any], timeout_s: float) -> None:
         """An arm or takeoff command, noted for the ground evidence (``flighttest.flying.ground``): given up on

@@ -21,7 +21,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
+import numpy as np
+
+from flighttest.model.aero import G_MPS2
 from flighttest.model.drag import DragModel
+from flighttest.model.frames import GuardRegion, worst_blade_velocity_mps
+from flighttest.model.trajectory import Trajectory
 from flighttest.model.wind_estimate import WindFilter
 
 # a horizontal wind within this many σ of the estimate covers 95 % of a 2-D normal distribution
@@ -135,3 +140,48 @@ class WindSources:
         if not found:
             return WindEstimate((0.0, 0.0, 0.0), self.unknown_sd_mps, "assumed calm")
         return fuse(found)
+
+
+# -- the plan in the wind that blows ---------------------------------------------------------------------
+
+
+def plan_margin_in_wind(traj: Trajectory, region: GuardRegion, drag: DragModel | None, mass_kg: float,
+                        wind: WindEstimate) -> tuple[float, float]:  # fmt: skip
+    """The plan's smallest guard margin (m/s) and its time (s, from the plan's start) in this wind, at the
+    worst air its uncertainty allows, as the guard will judge it: the air-relative velocity, and the disk
+    tilted as the plan's acceleration *and the drag of that air* need (thrust along −z_body balances
+    both), whatever attitude the plan was made with."""
+    df = traj.df
+    v = df[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(float)
+    a = df[["an_mps2", "ae_mps2", "ad_mps2"]].to_numpy(float)
+    v_air = v - np.asarray(wind.ned_mps, float)
+    drag_per_kg = drag.mean_linear_n_per_mps(float(np.hypot(*v_air[:, :2].T).max())) / mass_kg if drag else 0.0
+    # m·a = T + D + m·g  →  thrust direction −z_b ∥ a − g − D/m, with D = −drag·v_air
+    z_b = np.column_stack([-a[:, 0] - drag_per_kg * v_air[:, 0], -a[:, 1] - drag_per_kg * v_air[:, 1],
+                           G_MPS2 - a[:, 2] - drag_per_kg * v_air[:, 2]])  # fmt: skip
+    z_b /= np.maximum(np.linalg.norm(z_b, axis=1, keepdims=True), 1e-9)
+    w = np.einsum("ij,ij->i", v_air, z_b)
+    u = np.linalg.norm(v_air - w[:, None] * z_b, axis=1)
+    tilt_sin = np.hypot(z_b[:, 0], z_b[:, 1])
+    margin = np.asarray(region.margin(*worst_blade_velocity_mps(w, u, tilt_sin, wind.radius_mps)), float)
+    i = int(np.argmin(margin))
+    return float(margin[i]), float(df["t_s"].iloc[i] - df["t_s"].iloc[0])
+
+
+def rotate_plan(traj: Trajectory, angle_rad: float) -> Trajectory:
+    """The plan turned about the vertical by ``angle_rad`` (north towards east): a plan made for a wind from
+    one direction, for the same wind from another (gravity is the same whichever way the wind blows)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    df = traj.df.copy()
+    for x, y in (("n_m", "e_m"), ("vn_mps", "ve_mps"), ("an_mps2", "ae_mps2")):
+        n, e = df[x].to_numpy(float), df[y].to_numpy(float)
+        df[x], df[y] = c * n - s * e, s * n + c * e
+    df["yaw_deg"] = (df["yaw_deg"] + math.degrees(angle_rad) + 180.0) % 360.0 - 180.0
+    if traj.has_attitude():  # q' = q_z(angle) ⊗ q
+        hw, hz = math.cos(angle_rad / 2), math.sin(angle_rad / 2)
+        qw, qx, qy, qz = (df[k].to_numpy(float) for k in ("qw", "qx", "qy", "qz"))
+        df["qw"], df["qx"] = hw * qw - hz * qz, hw * qx - hz * qy
+        df["qy"], df["qz"] = hw * qy + hz * qx, hw * qz + hz * qw
+    meta = dict(traj.meta)
+    meta["rotated_deg"] = round(math.degrees(angle_rad), 3)
+    return Trajectory(df, meta)

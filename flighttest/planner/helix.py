@@ -47,10 +47,10 @@ import numpy as np
 
 from flighttest.errors import FlighttestError
 from flighttest.model.aero import G_MPS2
-from flighttest.model.frames import quat_from_euler, quat_multiply, quat_to_rotmat
+from flighttest.model.frames import quat_from_euler, quat_multiply, quat_to_rotmat, worst_blade_velocity_mps
 from flighttest.model.profiles import VehicleProfile
 from flighttest.planner.autopilot_limits import capped, plan_limits
-from flighttest.planner.cone import VelocityConstraint
+from flighttest.planner.cone import VelocityConstraint, ppos
 from flighttest.planner.multistart import attempt_record, multistart_refined, refine
 from flighttest.planner.ocp import (
     DenseSolution,
@@ -96,6 +96,11 @@ class HelixProblem:
     # collective-thrust rate bound (m/s³): a plan's thrust steps become vertical jerks the autopilot's
     # velocity loop overshoots (None: unbounded, the paper's optimum)
     thrust_rate_max_mps3: float | None = None
+    # planning for wind: the drag per unit mass (1/s, linear) that tilts the real disk beyond the plan's
+    # attitude, and how far the wind may be off (m/s): the guard constraint holds for the worst air within
+    # it (flighttest.model.frames.worst_blade_velocity_mps). Both 0: the still-air problem as ever
+    drag_per_s: float = 0.0
+    wind_radius_mps: float = 0.0
 
     def validate(self) -> None:
         for name, v in (("height", self.height_m), ("radius", self.radius_m), ("max speed", self.speed_max_mps),
@@ -136,6 +141,8 @@ class HelixProblem:
             "accel_h_max_mps2": self.accel_h_max_mps2,
             "thrust_rate_max_mps3": self.thrust_rate_max_mps3,
             "wind_ned_mps": list(self.wind_ned_mps),
+            "drag_per_s": self.drag_per_s,
+            "wind_radius_mps": self.wind_radius_mps,
             "n_intervals": self.n_intervals,
             **self.constraint.summary(),
         }
@@ -267,17 +274,41 @@ def _dynamics_np(x, u):
     return np.concatenate([x[3:6], acc, qdot])
 
 
-def _blade(p: HelixProblem, x):
-    """(w, u²) of the air-relative body velocity (CasADi)."""
-    vb = _rot(x[6:10]).T @ (x[3:6] - ca.DM(p.wind_ned_mps))
-    return vb[2], vb[0] ** 2 + vb[1] ** 2
+def _wind_planned(p: HelixProblem) -> bool:
+    return p.drag_per_s > 0 or p.wind_radius_mps > 0
 
 
-def blade_velocity_np(p: HelixProblem, x: np.ndarray):
-    """(w, u) of the air-relative body velocity for states (M, 10)."""
+def _blade(p: HelixProblem, x, u):
+    """(w, u²) of the air-relative body velocity (CasADi); planning for wind, (w, u) at the worst air
+    within ``wind_radius_mps`` of the disk the thrust really takes: the plan's net acceleration plus the
+    drag of the air, ``z ∝ f·z_plan − drag·v_air`` (the autopilot tilts for both)."""
+    v_air = x[3:6] - ca.DM(p.wind_ned_mps)
+    if not _wind_planned(p):
+        vb = _rot(x[6:10]).T @ v_air
+        return vb[2], vb[0] ** 2 + vb[1] ** 2
+    z = _rot(x[6:10])[:, 2] * u[0] - p.drag_per_s * v_air
+    z = z / ca.norm_2(z)
+    w = ca.dot(v_air, z)
+    d = p.constraint.smoothing_mps
+    u_air = ca.sqrt(ca.fmax(ca.sumsqr(v_air) - w * w, 0.0) + d * d) - d
+    u_worst = ppos(u_air - p.wind_radius_mps, d)
+    tilt_sin = ca.sqrt(z[0] ** 2 + z[1] ** 2 + 1e-8)  # smooth at level, where the tilt's direction is undefined
+    return w + tilt_sin * p.wind_radius_mps, u_worst**2
+
+
+def blade_velocity_np(p: HelixProblem, x: np.ndarray, u: np.ndarray | None = None):
+    """(w, u) of the air-relative body velocity for states (M, 10); planning for wind (with the controls
+    (M, 4)), at the worst air within the radius of the disk the thrust really takes (``_blade``)."""
+    v_air = x[:, 3:6] - np.asarray(p.wind_ned_mps)
     r = quat_to_rotmat(x[:, 6:10] / np.linalg.norm(x[:, 6:10], axis=1, keepdims=True))
-    vb = np.einsum("kji,kj->ki", r, x[:, 3:6] - np.asarray(p.wind_ned_mps))
-    return vb[:, 2], np.hypot(vb[:, 0], vb[:, 1])
+    if not _wind_planned(p) or u is None:
+        vb = np.einsum("kji,kj->ki", r, v_air)
+        return vb[:, 2], np.hypot(vb[:, 0], vb[:, 1])
+    z = r[:, :, 2] * u[:, 0:1] - p.drag_per_s * v_air
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    w = np.einsum("ij,ij->i", v_air, z)
+    u_air = np.sqrt(np.maximum(np.einsum("ij,ij->i", v_air, v_air) - w * w, 0.0))
+    return worst_blade_velocity_mps(w, u_air, np.hypot(z[:, 0], z[:, 1]), p.wind_radius_mps)
 
 
 def _spec(p: HelixProblem, n: int) -> OcpSpec:
@@ -298,7 +329,7 @@ def _spec(p: HelixProblem, n: int) -> OcpSpec:
     path_lb, path_ub = _path_bounds(p)
 
     def path(x, u):
-        w, u_sq = _blade(p, x)
+        w, u_sq = _blade(p, x, u)
         q = x[6:10]
         rows = [
             con.slack_casadi(w, u_sq=u_sq),
@@ -772,7 +803,7 @@ def _overshoots(p: HelixProblem, r: OcpResult):
     n = len(r.t_s) - 1
     m = (len(d.t) - 1) // n  # dense samples per interval (rk4_piecewise: the start node, then m per interval)
     k = np.concatenate([[0], np.arange(n * m) // m])
-    w, u_air = blade_velocity_np(p, d.x)
+    w, u_air = blade_velocity_np(p, d.x, d.u)
     values = {
         "cone_mps": -p.constraint.margin(w, u_air) - CONE_TOL_MPS,
         "tilt_deg": _tilt_deg(d.x) - math.degrees(p.tilt_max_rad) - TILT_TOL_DEG,
@@ -818,7 +849,7 @@ def commanded_accel_np(x: np.ndarray, u: np.ndarray) -> np.ndarray:
 def _dense_figures(p: HelixProblem, r: OcpResult, rate_hz: float = 1000.0):
     d = dense_path(r, rate_hz)
     t, x, u = d.t, d.x, d.u
-    w, u_air = blade_velocity_np(p, x)
+    w, u_air = blade_velocity_np(p, x, u)
     margin = p.constraint.margin(w, u_air)
     i = int(np.argmin(margin))
     radius = np.hypot(x[:, 0], x[:, 1])
@@ -854,7 +885,7 @@ def resimulation_check(sol: HelixSolution, rate_hz: float = 1000.0) -> dict:
     r = sol.result
     p = sol.problem
     c = _dense_figures(p, r, rate_hz)
-    w_n, u_n = blade_velocity_np(p, r.x)
+    w_n, u_n = blade_velocity_np(p, r.x, r.u)
     tol = {"cone_mps": CONE_TOL_MPS, "tilt_deg": TILT_TOL_DEG, "radius_m": RADIUS_TOL_M,
            "controls_rel": CONTROL_TOL_REL, "node_gap_m": NODE_GAP_TOL_M, "accel_mps2": ACCEL_TOL_MPS2}  # fmt: skip
     rate_lim = math.degrees(max(p.rate_max_rps))

@@ -85,8 +85,12 @@ def helix_problem_for_flight(
     margin: TrackingMargin,
     n_intervals: int = 60,
     n_coarse: int = 30,
+    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    wind_radius_mps: float = 0.0,
 ) -> HelixProblem:
-    """The helix problem against the guard's own region (``w_allow``, margin) with ``margin`` on top."""
+    """The helix problem against the guard's own region (``w_allow``, margin) with ``margin`` on top. For a
+    wind (``wind_ned_mps`` known within ``wind_radius_mps``) the guard constraint judges the air the plan
+    will meet, with the disk tilted against the profile's drag as the real vehicle's will be."""
     constraint = VelocityConstraint(
         cone_deg=profile.vrs.cone_deg,
         w_allow_mps=profile.w_allow_mps,
@@ -109,4 +113,11 @@ def helix_problem_for_flight(
     # the lower of the margin's descent bound and the one the profile's autopilot sets (problem_for_vehicle)
     descent = capped(margin.descent_max_mps, p.descent_max_mps)
     thrust_rate = capped(margin.thrust_rate_max_mps3, p.thrust_rate_max_mps3)
-    return replace(p, f_min_mps2=f_min, descent_max_mps=descent, thrust_rate_max_mps3=thrust_rate)
+    p = replace(p, f_min_mps2=f_min, descent_max_mps=descent, thrust_rate_max_mps3=thrust_rate)
+    if any(wind_ned_mps) or wind_radius_mps > 0:
+        drag = profile.drag
+        airspeed = math.hypot(*wind_ned_mps[:2]) + 2.0  # about the helix's own speed on top of the wind
+        drag_per_s = drag.mean_linear_n_per_mps(airspeed) / profile.mass_kg if drag is not None else 0.0
+        p = replace(p, wind_ned_mps=tuple(float(x) for x in wind_ned_mps), wind_radius_mps=float(wind_radius_mps),
+                    drag_per_s=drag_per_s)  # fmt: skip
+    return p

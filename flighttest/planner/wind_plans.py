@@ -1,0 +1,72 @@
+"""Helix plans made ahead for the winds a flight may meet, so that the start hover only has to choose.
+
+A helix takes several seconds of IPOPT, too long to plan in the hover before the descent. The descent
+runs from hover to hover on one vertical line, and gravity is the same whichever way the wind blows, so a
+plan made for a wind of speed ``s`` from one direction serves that speed from any direction turned about
+the vertical (``flighttest.flying.wind.rotate_plan``). Plans are made for a ladder of speeds up to the
+mission's ``max_wind_mps``, each keeping clear of the guard region for any wind within ``wind_radius_mps``
+of its own and with the disk tilted against the profile's drag (``flighttest.planner.tracking``), and
+kept in a cache keyed by everything they depend on: a second flight of the same mission plans nothing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from flighttest import __version__
+from flighttest.errors import FlighttestError
+from flighttest.model.profiles import VehicleProfile
+from flighttest.model.trajectory import Trajectory
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("FLIGHTTEST_CACHE", "~/.cache/flighttest")).expanduser() / "plans"
+
+
+def wind_speeds(max_wind_mps: float, step_mps: float) -> list[float]:
+    """The ladder of wind speeds plans are made for (above calm, which the mission's own plan flies)."""
+    if step_mps <= 0 or max_wind_mps <= 0:
+        return []
+    n = int(max_wind_mps / step_mps + 1e-9)
+    return [round(step_mps * (k + 1), 3) for k in range(n)]
+
+
+def _key(profile: VehicleProfile, plan: dict[str, Any], speed_mps: float, radius_mps: float) -> str:
+    what = {"profile": profile.summary(), "plan": plan, "speed_mps": speed_mps, "radius_mps": radius_mps,
+            "flighttest": __version__}  # fmt: skip
+    return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
+
+def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_mps: list[float], radius_mps: float,
+                          solve: Callable[[float, float], Trajectory],
+                          progress: Callable[[str], None] = lambda _: None) -> list[Trajectory]:  # fmt: skip
+    """One plan per speed, the wind along +east (NED (0, s, 0)), from the cache or ``solve(speed, radius)``.
+    A speed the planner cannot serve is left out (said through ``progress``): the hover then has fewer to
+    choose from, and refuses to descend where none fits."""
+    out = []
+    root = cache_dir()
+    for s in speeds_mps:
+        base = root / f"helix-{profile.name}-{_key(profile, plan, s, radius_mps)}"
+        try:
+            out.append(Trajectory.load(base, profile))
+            continue
+        except FlighttestError:
+            pass
+        progress(f"planning the helix for {s:g} m/s of wind (±{radius_mps:g} m/s): a few seconds")
+        try:
+            traj = solve(s, radius_mps)
+        except FlighttestError as exc:
+            progress(f"no helix for {s:g} m/s of wind: {exc}")
+            continue
+        try:
+            base.parent.mkdir(parents=True, exist_ok=True)
+            traj.save(base)
+        except OSError:
+            pass  # a cache that cannot be written plans again next time, nothing worse
+        out.append(traj)
+    return out
