@@ -99,6 +99,7 @@ class IdentifyConfig:
 
 
 MAX_RELATIVE_UNCERTAINTY = 0.25  # an onset known to worse than ±25 % of itself is not one to fly by
+PROVENANCE_PATH_CHARS = 400  # of the probe log's path in a stored w_allow's source line (within 2000 chars)
 MAX_SWEEP_GAP_S = 1.0  # a telemetry gap this long inside the sweep: the log is damaged, not a slow link
 
 
@@ -278,8 +279,12 @@ class Onset:
     def provenance(self, log_path: Path | str, by: str) -> str:
         """The ``source`` line stored with the identified ``w_allow`` in a profile."""
         today = dt.date.today().isoformat()
+        where = str(Path(log_path).resolve())
+        if len(where) > PROVENANCE_PATH_CHARS:  # the profile's text field is bounded; the path's ends say most
+            keep = PROVENANCE_PATH_CHARS // 2
+            where = f"{where[:keep]}…{where[-keep:]}"
         return (
-            f"identified {today} by {by} from probe log {Path(log_path).resolve()}: onset "
+            f"identified {today} by {by} from probe log {where}: onset "
             f"{self.w_onset_mps:.3f} ± {self.uncertainty_mps:.3f} m/s ({self.w_onset_n:.4f} v_h), "
             f"hinge fit of fluctuation power vs descent rate (rise {self.rise_ratio:.1f}× hover)"
         )
