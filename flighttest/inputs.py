@@ -372,7 +372,12 @@ def check_text(value: Any, name: str, max_chars: int = 1000, single_line: bool =
     bad = _CONTROL.search(value) if single_line else re.search(r"[\x00-\x08\x0b-\x1f\x7f]", value)
     if bad:
         raise FlighttestError(f"{name} contains a control character ({bad.group()!r})")
+    if _SURROGATE.search(value):  # a file name's undecodable bytes: no UTF-8 file can hold them
+        raise FlighttestError(f"{name} is not UTF-8 text (holds {_SURROGATE.search(value).group()!r})")
     return value
+
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
 
 
 def check_path_text(path: Path | str, what: str) -> str:
@@ -381,6 +386,12 @@ def check_path_text(path: Path | str, what: str) -> str:
     of a longer path raises ``ENAMETOOLONG``). For inputs that may be a file or a folder (log
     folders); :func:`check_input_file` and :func:`check_output_path` run the same checks."""
     return _path_text(path, what)
+
+
+def display_path(path: Path | str) -> str:
+    """A path as UTF-8 text, for tables, Parquet and messages: a name in another encoding (Latin-1 from an
+    old card; Python keeps its bytes as surrogates, which UTF-8 text cannot hold) shows its bytes as ``\\xNN``."""
+    return os.fsencode(os.fspath(path)).decode("utf-8", "backslashreplace")
 
 
 def check_output_folder(text: str | os.PathLike, name: str) -> Path:

@@ -10,11 +10,15 @@ allocation of terabytes or exit 1 before.
 
 from __future__ import annotations
 
+import io
 import json
+import os
 import struct
+import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -288,3 +292,50 @@ def test_identify_refuses_a_fit_larger_than_it_handles(probe_tlog, monkeypatch):
 def test_an_ordinary_deep_output_folder_is_still_taken(tmp_path):
     deep = tmp_path.joinpath(*(["d" * 200] * 10))
     assert check_output_folder(deep, "-o") == deep
+
+
+# -- found by the fuzz lane (tests/test_fuzz_lane.py) ----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["campaign", "--connect", "", "-o", "camp"], "--connect"),  # was a ValueError: "either a link or the fake"
+        (["campaign", "--sim", "-o", "camp", "--sim-param", "COM_RC_OVERRIDE=" + "9" * 400], "--sim-param"),  # float()
+    ],
+)
+def test_campaign_options_found_by_the_fuzz_lane_are_one_line(cli, argv, needle):
+    _refused(cli, argv, needle)
+
+
+@pytest.fixture
+def latin1_logs(cli, probe_tlog) -> Path:
+    """A folder holding a probe log whose name is not UTF-8 (byte 0xff: Latin-1 'ÿ' from an old card)."""
+    logs = cli.root / "logs"
+    logs.mkdir()
+    (logs / os.fsdecode(b"probe-\xff.tlog")).write_bytes(probe_tlog.read_bytes())
+    return logs
+
+
+def test_a_log_whose_name_is_not_utf8_is_analysed_reported_and_identified(cli, latin1_logs):
+    log = latin1_logs / os.fsdecode(b"probe-\xff.tlog")
+    # each was "analysis failed (UnicodeEncodeError ...", "writing the report failed (TypeError ..." or a traceback
+    rc, out, err = cli("analyse", str(latin1_logs), "--json", "--jobs", "1")
+    assert rc == 0 and json.loads(out)[0]["descents"], err
+    table = pd.read_parquet(latin1_logs / "flighttest-descents.parquet")
+    assert set(table["log"]) == {str(latin1_logs) + "/probe-\\xff.tlog"}  # the bytes shown, the text UTF-8
+    rc, _, err = cli("report", str(log), "-o", str(cli.root / "report"), "--vehicle", "x500")
+    assert rc == 0 and "\\xff" in (cli.root / "report" / "report.md").read_text(encoding="utf-8"), err
+    rc, out, err = cli("identify", str(log), "--vehicle", "x500", "--write-profile", "--json")
+    assert rc == 0, err
+    stored = load_profile(json.loads(out)["profile_written"])
+    assert "probe-\\xff.tlog" in stored.vrs.source
+
+
+def test_a_strict_stdout_prints_a_name_that_is_not_utf8(latin1_logs, monkeypatch, tmp_path):
+    # stdout is strict under a UTF-8 locale such as en_US.UTF-8: printing the name was a UnicodeEncodeError
+    raw = io.BytesIO()
+    monkeypatch.setattr(sys, "stdout", io.TextIOWrapper(raw, encoding="utf-8", errors="strict", write_through=True))
+    monkeypatch.setattr(sys, "stderr", io.TextIOWrapper(io.BytesIO(), encoding="utf-8", errors="backslashreplace"))
+    assert main(["analyse", str(latin1_logs), "--jobs", "1", "--parquet", str(tmp_path / "t.parquet")]) == 0
+    assert b"-\xff.tlog" in raw.getvalue()  # the name's own bytes, as ls shows them (rich may wrap the path)

@@ -75,7 +75,7 @@ from flighttest.analysis.fluctuation import FluctuationConfig, hover_mask
 from flighttest.analysis.pipeline import prepare_state
 from flighttest.analysis.schema import RATES, FlightLog
 from flighttest.errors import FlighttestError
-from flighttest.inputs import MAX_SPEED_MPS, shown
+from flighttest.inputs import MAX_SPEED_MPS, display_path, shown
 from flighttest.model.profiles import VehicleProfile, plausible_w_allow_range
 
 PROBE_PHASES = ("settle", "stream")
@@ -285,7 +285,7 @@ class Onset:
     def provenance(self, log_path: Path | str, by: str) -> str:
         """The ``source`` line stored with the identified ``w_allow`` in a profile."""
         today = dt.date.today().isoformat()
-        where = str(Path(log_path).resolve())
+        where = display_path(Path(log_path).resolve())
         if len(where) > PROVENANCE_PATH_CHARS:  # the profile's text field is bounded; the path's ends say most
             keep = PROVENANCE_PATH_CHARS // 2
             where = f"{where[:keep]}…{where[-keep:]}"
