@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing as mp
 import resource
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -60,7 +61,9 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--minutes", type=float, default=60.0)
     args = ap.parse_args()
-    from flighttest.analysis.synthetic import SyntheticFlight, write_tlog
+    # the log writers are the tests' (tests/synthetic.py), not part of the installed package
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from synthetic import SyntheticFlight, write_tlog
 
     path = Path(tempfile.gettempdir()) / f"flighttest_bench_{args.minutes:g}min.tlog"
     if not path.exists():

@@ -51,6 +51,9 @@ MAX_JSON_BYTES = 16_000_000  # sidecars and campaign records
 MAX_CSV_BYTES = 256_000_000  # 600 s of a trajectory at 1 kHz is ~120 MB
 NAME_MAX_BYTES = 255  # one path component on Linux, macOS and Windows file systems
 PATH_MAX_BYTES = 4095
+# an output folder leaves this much of PATH_MAX_BYTES to what is written inside it (the campaign's deepest,
+# flights/<time>-<mission>/ and a temporary file's name, is under 100 bytes)
+OUTPUT_FOLDER_ROOM_BYTES = 200
 
 
 class UsageError(FlighttestError):
@@ -283,8 +286,9 @@ def decode_text(data: bytes, path: Path | str, what: str) -> str:
     except UnicodeDecodeError as exc:
         bad = data[exc.start]
         raise InputFileError(
-            path, what, f"not UTF-8 text (byte 0x{bad:02x} at offset {exc.start}; Latin-1 or another encoding? "
-            "save it as UTF-8)",
+            path,
+            what,
+            f"not UTF-8 text (byte 0x{bad:02x} at offset {exc.start}; Latin-1 or another encoding? save it as UTF-8)",
         ) from None
 
 
@@ -378,7 +382,12 @@ def check_text(value: Any, name: str, max_chars: int = 1000, single_line: bool =
     bad = _CONTROL.search(value) if single_line else re.search(r"[\x00-\x08\x0b-\x1f\x7f]", value)
     if bad:
         raise FlighttestError(f"{name} contains a control character ({bad.group()!r})")
+    if _SURROGATE.search(value):  # a file name's undecodable bytes: no UTF-8 file can hold them
+        raise FlighttestError(f"{name} is not UTF-8 text (holds {_SURROGATE.search(value).group()!r})")
     return value
+
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
 
 
 def check_path_text(path: Path | str, what: str) -> str:
@@ -389,6 +398,12 @@ def check_path_text(path: Path | str, what: str) -> str:
     return _path_text(path, what)
 
 
+def display_path(path: Path | str) -> str:
+    """A path as UTF-8 text, for tables, Parquet and messages: a name in another encoding (Latin-1 from an
+    old card; Python keeps its bytes as surrogates, which UTF-8 text cannot hold) shows its bytes as ``\\xNN``."""
+    return os.fsencode(os.fspath(path)).decode("utf-8", "backslashreplace")
+
+
 def check_output_folder(text: str | os.PathLike, name: str) -> Path:
     """An output *folder* (``-o DIR``, ``--log-dir``) checked before anything is written or connects: a
     name (an empty one would be the current folder), no control character, and a folder there must be
@@ -396,12 +411,26 @@ def check_output_folder(text: str | os.PathLike, name: str) -> Path:
     text = os.fspath(text)
     if not text.strip() or any(not c.isprintable() for c in text):
         raise FlighttestError(f"{name} {text!r}: not a folder name (empty, or a control character)")
+    _path_text(text, name)  # each name and the whole within the file system's limits
+    size = len(os.fsencode(text))
+    if size > PATH_MAX_BYTES - OUTPUT_FOLDER_ROOM_BYTES:
+        most = PATH_MAX_BYTES - OUTPUT_FOLDER_ROOM_BYTES
+        raise FlighttestError(f"{name} {text[:60]}…: the path is too long ({size} bytes; an output folder at most "
+                              f"{most}, room for the files written inside)")  # fmt: skip
     root = Path(text)
     probe = root
-    while not probe.exists() and probe != probe.parent:  # the nearest folder that exists
-        probe = probe.parent
-    if probe.exists() and not probe.is_dir():
+    while True:  # the nearest folder that exists
+        try:
+            st = os.stat(probe)
+            break
+        except (FileNotFoundError, NotADirectoryError):
+            if probe == probe.parent:
+                return root
+            probe = probe.parent
+        except OSError as exc:
+            raise FlighttestError(f"{name} {text}: {probe}: {exc.strerror or exc}") from None
+    if not stat.S_ISDIR(st.st_mode):
         raise FlighttestError(f"{name} {text}: {probe} is a file, not a folder")
-    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
+    if not os.access(probe, os.W_OK | os.X_OK):
         raise FlighttestError(f"{name} {text}: the folder {probe} is not writable")
     return root

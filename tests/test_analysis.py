@@ -14,16 +14,16 @@ from flighttest.analysis.identify import identify_onset
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
 from flighttest.analysis.segment import SegmentConfig
-from flighttest.analysis.synthetic import (
+from flighttest.cli import main
+from flighttest.errors import FlighttestError
+from flighttest.model.profiles import load_profile
+from synthetic import (
     UNIX0,
     SyntheticFlight,
     write_dataflash,
     write_tlog,
     write_ulog,
 )
-from flighttest.cli import main
-from flighttest.errors import FlighttestError
-from flighttest.model.profiles import load_profile
 
 WRITERS = {"tlog": (write_tlog, "f.tlog"), "ulog": (write_ulog, "f.ulg"), "dataflash": (write_dataflash, "f.bin")}
 H, D, T0 = 5.0, 2.5, 10.0  # the known descent: 5 m in 2.5 s from t = 10 s

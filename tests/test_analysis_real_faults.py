@@ -27,8 +27,8 @@ import pytest
 
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.segment import GLITCH_COLUMNS, SegmentConfig
-from flighttest.analysis.synthetic import DF_RECORDS, SyntheticFlight, write_dataflash, write_tlog, write_ulog
 from flighttest.cli import main
+from synthetic import DF_RECORDS, SyntheticFlight, write_dataflash, write_tlog, write_ulog
 
 MOVES = [(3.0, -10.0, 4.0), (15.0, 10.0, 5.0)]  # take off to 10 m, land 10 m in 5 s from 15 s
 LAND_T0, LAND_H, LAND_D = MOVES[1]

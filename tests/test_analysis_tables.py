@@ -116,8 +116,8 @@ def test_compare_parameter_differences_fit(monkeypatch):
 @pytest.mark.parametrize("columns", [80, 200])
 def test_analyse_command_at_that_width(tmp_path, monkeypatch, capsys, columns):
     """The command itself (in-process, its console that wide); --json and --csv do not depend on it."""
-    from flighttest.analysis.synthetic import SyntheticFlight, write_tlog
     from flighttest.cli import main
+    from synthetic import SyntheticFlight, write_tlog
 
     log = write_tlog(
         SyntheticFlight(duration_s=20.0, descents=[(5.0, 3.0, 2.0), (12.0, 4.0, 2.5)]), tmp_path / "f.tlog"

@@ -29,9 +29,9 @@ from flighttest.analysis.fluctuation import FLUCTUATION_RANGES, FluctuationConfi
 from flighttest.analysis.loaders import load_log, sniff
 from flighttest.analysis.pipeline import analyse
 from flighttest.analysis.segment import SEGMENT_RANGES, SegmentConfig
-from flighttest.analysis.synthetic import UNIX0, SyntheticFlight, write_dataflash, write_tlog, write_ulog
 from flighttest.cli import main
 from flighttest.errors import FlighttestError
+from synthetic import UNIX0, SyntheticFlight, write_dataflash, write_tlog, write_ulog
 
 LONG_NAME = "n" * 300
 LONG_PATH = "/".join(["d" * 200] * 25)  # 5 kB: longer than any file system's path limit
@@ -345,7 +345,7 @@ def test_a_ulog_pyulog_would_resync_for_minutes_is_refused_in_seconds(tmp_path):
 
 
 def test_a_ulog_with_text_parameters_loads_the_numeric_ones(corpus, tmp_path):
-    from flighttest.analysis.synthetic import PX4_PARAMS
+    from synthetic import PX4_PARAMS
 
     log = load_log(corpus / "s.ulg")
     assert set(log.params) == set(PX4_PARAMS)

@@ -10,7 +10,6 @@ import pytest
 
 from flighttest.analysis.pipeline import Analysis, analyse_path
 from flighttest.analysis.segment import SegmentConfig
-from flighttest.analysis.synthetic import SyntheticFlight, write_tlog
 from flighttest.campaign import figures
 from flighttest.campaign.figures import (
     chart_limits,
@@ -20,6 +19,7 @@ from flighttest.campaign.figures import (
     plot_tracks_velocity_space,
 )
 from flighttest.errors import FlighttestError
+from synthetic import SyntheticFlight, write_tlog
 
 H_M, T0_S = 5.0, 8.0
 VERTICAL_S, HELIX_S = 8.4, 5.6  # raised-cosine durations; the segmenter's trimmed windows are a bit shorter

@@ -21,13 +21,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from flighttest.analysis.synthetic import UNIX0, SyntheticFlight, write_tlog
 from flighttest.campaign import steps as campaign_steps
 from flighttest.campaign.state import STEPS, CampaignState
 from flighttest.campaign.summary import read_summary
 from flighttest.cli import main
 from flighttest.flying.mission_scripts import load_mission_module
 from flighttest.model.profiles import load_profile
+from synthetic import UNIX0, SyntheticFlight, write_tlog
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 SIH_PROBE = SHARED / "px4_sih" / "probe-full-sweep"
@@ -281,8 +281,9 @@ def test_an_onset_identify_refuses_keeps_the_prior_only_where_its_band_reaches_i
         assert rc == 0 and rec["status"] == "done", err
         o = rec["outputs"]
         assert o["onset_found"] is False and o["w_onset_mps"] is None and o["w_onset_lower_bound_mps"] is None
-        assert o["message"] == identify.untrusted_onset_line(identify.ImplausibleOnset("", w0, unc, (
-            "its uncertainty is too large",)), prior)
+        assert o["message"] == identify.untrusted_onset_line(
+            identify.ImplausibleOnset("", w0, unc, ("its uncertainty is too large",)), prior
+        )
         assert f"w_allow stays at prior {prior:.3f} m/s" in o["message"]
         assert s["identify_message"] == o["message"]
         assert load_profile(root / "vehicles" / "x500.toml").w_allow_mps == pytest.approx(prior)

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from test_fly_missions import (
     CI_STALE_PERIODS,
     assert_complete_log,

@@ -3,7 +3,7 @@ or is refused with one ``FlighttestError`` line — never another exception, nev
 numpy warning or a reader's chatter on stdout — and ``flighttest analyse --json`` prints one JSON
 document whatever the damage.
 
-Seeds: synthetic logs of every format (:mod:`flighttest.analysis.synthetic`, 4 s flights) and the
+Seeds: synthetic logs of every format (:mod:`synthetic` (tests/synthetic.py), 4 s flights) and the
 first bytes of real PX4 and ArduPilot logs (``tests/data``). Mutations: bit flips, random bytes
 written over, inserted or deleted, truncation, a chunk duplicated. Hypothesis runs derandomised
 with no example database, so every run tries the same cases; each example has its own time limit
@@ -28,9 +28,9 @@ from hypothesis import strategies as st
 from flighttest.analysis.batch import quiet_numerics
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
-from flighttest.analysis.synthetic import SyntheticFlight, write_dataflash, write_tlog, write_ulog
 from flighttest.cli import main
 from flighttest.errors import FlighttestError
+from synthetic import SyntheticFlight, write_dataflash, write_tlog, write_ulog
 
 DATA = Path(__file__).parent / "data"
 REAL = {
@@ -192,7 +192,7 @@ def folder(seeds, tmp_path_factory) -> Path:
     import numpy as np
     import pandas as pd
 
-    from flighttest.analysis.synthetic import UNIX0
+    from synthetic import UNIX0
 
     root = tmp_path_factory.mktemp("folder") / "log"
     root.mkdir()

@@ -30,7 +30,6 @@ from flighttest.analysis.identify import (
     implausible,
 )
 from flighttest.analysis.loaders import load_log
-from flighttest.analysis.synthetic import UNIX0, SyntheticFlight, write_tlog
 from flighttest.cli import main
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import (
@@ -40,6 +39,7 @@ from flighttest.model.profiles import (
     profile_to_dict,
     write_w_allow,
 )
+from synthetic import UNIX0, SyntheticFlight, write_tlog
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 SIH_PROBE = SHARED / "px4_sih" / "probe-full-sweep"

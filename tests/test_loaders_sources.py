@@ -19,7 +19,7 @@ import pytest
 
 from flighttest.analysis.loaders import dataflash, load_log
 from flighttest.analysis.schema import FlightLog, pressure_altitude_m
-from flighttest.analysis.synthetic import (
+from synthetic import (
     ARDUPILOT_PARAMS,
     DF_RECORDS,
     HOME_AMSL_M,

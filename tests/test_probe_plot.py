@@ -24,8 +24,8 @@ from flighttest.analysis.identify import IdentifyConfig, identify_onset, probe_s
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
 from flighttest.analysis.report import draw_fluctuation, plot_fluctuation, probe_fluctuation_bins
-from flighttest.analysis.synthetic import UNIX0, SyntheticFlight, write_tlog
 from flighttest.errors import FlighttestError
+from synthetic import UNIX0, SyntheticFlight, write_tlog
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 SIH_PROBE = SHARED / "px4_sih" / "probe-full-sweep"

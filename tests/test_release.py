@@ -76,6 +76,8 @@ def test_wheel_ships_missions_and_profiles_and_finds_them_installed(tmp_path):
     modules = _source_files("flighttest", "*.py") | _source_files("sitl_fakes", "*.py")
     assert modules <= names, f"not in the wheel (add the package to pyproject.toml): {sorted(modules - names)}"
     assert not any(n.startswith("missions/") for n in names), "missions/ must ship inside flighttest/"
+    # the tests' helpers (tests/synthetic.py's log writers) are not something a user runs
+    assert not any(n.startswith("tests/") or n.endswith("/synthetic.py") for n in names), sorted(names)
     meta = zipfile.ZipFile(wheel).read("flighttest-0.1.0.dist-info/METADATA").decode()
     assert "License-Expression: MIT" in meta
 

@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from virtual_flight import DESCENT_M, START_M, X500, fly, in_phase
 
 from flighttest.flying import guard as gd
 from flighttest.flying import log_writer
@@ -23,6 +22,7 @@ from flighttest.flying.wind import WindEstimate, WindSources, autopilot_report, 
 from flighttest.model.frames import quat_from_euler
 from flighttest.model.trajectory import Trajectory
 from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
+from virtual_flight import DESCENT_M, START_M, X500, fly, in_phase
 
 AP_READY = {**AP_DEFAULTS, "WP_ACC_Z": 1.5}
 

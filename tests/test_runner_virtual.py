@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from virtual_flight import DESCENT_M, START_M, X500, Flight, config, fly, in_phase
 
 from flighttest.flying import guard as gd
 from flighttest.flying.autopilot import ARDUPILOT
@@ -23,6 +22,7 @@ from flighttest.flying.runner import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, FlyReques
 from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
 from sitl_fakes.scripted import ScriptedAutopilot
 from sitl_fakes.virtual_time import run_virtual
+from virtual_flight import DESCENT_M, START_M, X500, Flight, config, fly, in_phase
 
 # -- the nominal flight --------------------------------------------------------------------------------
 

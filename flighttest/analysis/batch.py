@@ -3,7 +3,8 @@
 ``find_logs(root)`` returns flighttest log folders (a folder counts once, its ``flight.tlog`` is
 not listed again) and loose log files: named ``.tlog``/``.bin``/``.ulg``, or of any name when
 their first bytes are a log's (:func:`flighttest.analysis.loaders.looks_like_log`); FIFOs and
-devices are never listed (reading one would block). ``analyse_many`` runs the pipeline in a process
+devices are never listed (reading one would block), and a name with a control character is skipped
+with a note (the other logs are analysed). ``analyse_many`` runs the pipeline in a process
 pool (``os.cpu_count()`` workers); a log that fails gives one error line, not a stopped campaign.
 ``write_parquet`` stores the per-descent table (one row per descent, the ``log`` column says which
 file) for pandas or DuckDB, written whole or not at all.
@@ -25,7 +26,7 @@ from flighttest.analysis.loaders import looks_like_log
 from flighttest.analysis.loaders.folder import is_log_folder
 from flighttest.analysis.segment import SegmentConfig
 from flighttest.errors import FlighttestError
-from flighttest.inputs import atomic_write
+from flighttest.inputs import InputFileError, atomic_write, check_path_text
 
 PARQUET_NAME = "flighttest-descents.parquet"
 MAX_JOBS = 256  # worker processes: beyond any machine's cores, and each holds a log in memory
@@ -43,17 +44,31 @@ def quiet_numerics() -> Iterator[None]:
         yield
 
 
-def find_logs(root: Path) -> list[Path]:
+def find_logs(root: Path) -> tuple[list[Path], list[str]]:
+    """(logs, skipped): the logs under ``root`` in sorted order, and one line per file or folder left out
+    because its path is not one flighttest takes (a control character such as a newline in the name, a
+    path beyond the file system's length): named and skipped, so the rest of the folder is analysed."""
     found: list[Path] = []
+    skipped: list[str] = []
+
+    def takes(path: Path, kind: str) -> bool:
+        try:
+            check_path_text(path, kind)
+        except InputFileError as exc:
+            skipped.append(f"skipped the {kind} {exc.path}: {exc.reason}; rename it to analyse it")
+            return False
+        return True
+
     for dirpath, dirnames, filenames in os.walk(root):
         d = Path(dirpath)
         if is_log_folder(d):
             found.append(d)
             dirnames.clear()
             continue
-        dirnames.sort()
-        found += [d / f for f in sorted(filenames) if f != PARQUET_NAME and looks_like_log(d / f)]
-    return found
+        dirnames[:] = sorted(n for n in dirnames if takes(d / n, "folder"))
+        found += [d / f for f in sorted(filenames)
+                  if f != PARQUET_NAME and takes(d / f, "file") and looks_like_log(d / f)]  # fmt: skip
+    return found, skipped
 
 
 def _one(args: tuple[str, str | None, SegmentConfig | None]) -> tuple[str, dict | None, str | None]:

@@ -75,7 +75,7 @@ from flighttest.analysis.fluctuation import FluctuationConfig, hover_mask
 from flighttest.analysis.pipeline import prepare_state
 from flighttest.analysis.schema import RATES, FlightLog
 from flighttest.errors import FlighttestError
-from flighttest.inputs import shown
+from flighttest.inputs import MAX_SPEED_MPS, display_path, shown
 from flighttest.model.profiles import VehicleProfile, plausible_w_allow_range
 
 PROBE_PHASES = ("settle", "stream")
@@ -99,6 +99,13 @@ class IdentifyConfig:
 
 
 MAX_RELATIVE_UNCERTAINTY = 0.25  # an onset known to worse than ±25 % of itself is not one to fly by
+# A blade-frame descent speed beyond any flight test's (flighttest.inputs.MAX_SPEED_MPS) is damaged telemetry,
+# not a sample of the sweep: one such sample would also stretch the onset grid to its speed.
+MAX_PROBE_SPEED_MPS = MAX_SPEED_MPS
+# The fit's grid of candidate onsets times the samples it windows: a probe at 50 Hz is ~1e6 cells; beyond
+# this the fit (a hundred bootstrap refits) would take most of an hour and gigabytes
+MAX_FIT_CELLS = 20_000_000
+PROVENANCE_PATH_CHARS = 400  # of the probe log's path in a stored w_allow's source line (within 2000 chars)
 MAX_SWEEP_GAP_S = 1.0  # a telemetry gap this long inside the sweep: the log is damaged, not a slow link
 
 
@@ -278,8 +285,12 @@ class Onset:
     def provenance(self, log_path: Path | str, by: str) -> str:
         """The ``source`` line stored with the identified ``w_allow`` in a profile."""
         today = dt.date.today().isoformat()
+        where = display_path(Path(log_path).resolve())
+        if len(where) > PROVENANCE_PATH_CHARS:  # the profile's text field is bounded; the path's ends say most
+            keep = PROVENANCE_PATH_CHARS // 2
+            where = f"{where[:keep]}…{where[-keep:]}"
         return (
-            f"identified {today} by {by} from probe log {Path(log_path).resolve()}: onset "
+            f"identified {today} by {by} from probe log {where}: onset "
             f"{self.w_onset_mps:.3f} ± {self.uncertainty_mps:.3f} m/s ({self.w_onset_n:.4f} v_h), "
             f"hinge fit of fluctuation power vs descent rate (rise {self.rise_ratio:.1f}× hover)"
         )
@@ -406,7 +417,8 @@ def probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) 
         raise FlighttestError(f"{log.name}: {exc}") from None
     w_all = velocity_track(state, profile)["w_mps"].to_numpy(float)
     h = -state["d_m"].to_numpy(float)
-    use = np.isfinite(power) & np.isfinite(w_all) & ~state["glitch"].to_numpy(bool) & (h > np.nanmin(h) + 0.5)
+    physical = np.abs(np.nan_to_num(w_all, nan=np.inf)) <= MAX_PROBE_SPEED_MPS
+    use = np.isfinite(power) & physical & ~state["glitch"].to_numpy(bool) & (h > np.nanmin(h) + 0.5)
     probe = _probe_mask(log, t)
     if probe is not None:
         use &= probe
@@ -427,10 +439,20 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     w_sorted = np.sort(w_all[use])
     hi = w_sorted[-cfg.min_samples_above] if len(w_sorted) > cfg.min_samples_above else w_top
     grid = np.arange(cfg.min_speed_mps, max(hi, cfg.min_speed_mps + cfg.step_mps), cfg.step_mps)
-    # the model's speed term, windowed exactly like the data (computed on the whole series, then selected)
+    # the model's speed term, windowed exactly like the data: over the span of the selected samples and a
+    # window either side (every window of a selected sample lies inside), then selected
     w_filled = np.nan_to_num(w_all, nan=0.0)
-    excess2 = np.maximum(w_filled[None, :] - grid[:, None], 0.0) ** 2
-    zs = _centred_mean(np.where(use[None, :], excess2, np.nan), n_win)[:, use]
+    used = np.flatnonzero(use)
+    span = slice(max(int(used[0]) - n_win, 0), int(used[-1]) + n_win + 1)
+    cells = len(grid) * (span.stop - span.start)
+    if cells > MAX_FIT_CELLS:
+        raise FlighttestError(
+            f"{log.name}: {span.stop - span.start:,} samples ({t[span][-1] - t[span][0]:.0f} s) with descents up to "
+            f"{hi:.2f} m/s are more than identify fits ({cells:,} sample-speed cells, at most {MAX_FIT_CELLS:,}): "
+            "give it the probe flight's log alone"
+        )
+    excess2 = np.maximum(w_filled[None, span] - grid[:, None], 0.0) ** 2
+    zs = _centred_mean(np.where(use[None, span], excess2, np.nan), n_win)[:, use[span]]
     y = y_all[use]
     w0, b0, b1, k = _onset_from(y, zs, grid, cfg.irls_iterations)
     rise = math.sqrt((b0 + b1 * max(w_top - w0, 0.0) ** 2) / b0) if math.isfinite(w0) else 1.0

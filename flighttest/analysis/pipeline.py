@@ -30,6 +30,7 @@ from flighttest.analysis.params import relevant
 from flighttest.analysis.schema import FlightLog
 from flighttest.analysis.segment import GLITCH_COLUMNS, SegmentConfig, find_descents
 from flighttest.errors import FlighttestError
+from flighttest.inputs import display_path
 from flighttest.model.profiles import VehicleProfile, load_profile
 
 
@@ -219,7 +220,7 @@ def analyse(
     descents = pd.concat([descents.reset_index(drop=True), extra], axis=1)
     descents = _context(log, descents)
     descents.insert(0, "source", log.source)
-    descents.insert(0, "log", str(log.path))
+    descents.insert(0, "log", display_path(log.path))  # the table's text must be UTF-8 whatever the name
     notes.extend(prep.notes)
     return Analysis(log, descents, glitches, track, fl, baselines, profile, notes + log.notes, heights)
 

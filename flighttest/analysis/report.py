@@ -25,6 +25,7 @@ import pandas as pd
 
 from flighttest.analysis.pipeline import Analysis
 from flighttest.errors import FlighttestError
+from flighttest.inputs import display_path
 from flighttest.model.chart import draw_chart
 
 TABLE_COLUMNS = {
@@ -445,7 +446,7 @@ def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = 
         md += [
             f"## {a.log.name}",
             "",
-            f"- source: `{a.log.path}` ({a.log.source})",
+            f"- source: `{display_path(a.log.path)}` ({a.log.source})",
             f"- duration: {float(a.log.state['t_s'].iloc[-1]):.1f} s, {len(a.log.state)} samples",
         ]
         if a.log.mission_name:

@@ -54,6 +54,7 @@ import numpy as np
 import pandas as pd
 
 from flighttest.errors import FlighttestError
+from flighttest.inputs import display_path
 from flighttest.model import aero
 
 POSITION = ["n_m", "e_m", "d_m"]
@@ -182,7 +183,8 @@ class FlightLog:
 
     @property
     def name(self) -> str:
-        return self.path.name
+        """The file or folder name as UTF-8 text (for messages, titles, tables)."""
+        return display_path(self.path.name)
 
     @property
     def vehicle_name(self) -> str | None:

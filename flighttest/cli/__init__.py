@@ -52,10 +52,20 @@ def _wants_json(argv: list[str]) -> bool:
     return "--json" in words
 
 
+def _tolerant_stdout() -> None:
+    """A file name's bytes that are not UTF-8 (Python keeps them as surrogates) are written back as the bytes
+    they were, as Python does under the C locale: under a UTF-8 locale such as en_US.UTF-8 stdout is strict,
+    and printing such a log's name ended the command in a UnicodeEncodeError."""
+    out = sys.stdout
+    if getattr(out, "errors", None) == "strict" and hasattr(out, "reconfigure"):
+        out.reconfigure(errors="surrogateescape")
+
+
 def main(argv: list[str] | None = None) -> int:
     from flighttest import console
 
     argv = list(sys.argv[1:] if argv is None else argv)
+    _tolerant_stdout()
     as_json = _wants_json(argv)
     console.json_printed = False
     try:

@@ -168,7 +168,9 @@ def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
     walked: list[Path] = []
     for p in _log_paths(paths):
         if p.is_dir() and not is_log_folder(p):
-            found = find_logs(p)
+            found, skipped = find_logs(p)
+            for line in skipped:  # a note, not an error: the other logs of the folder are analysed
+                print(f"flighttest: note: {line}", file=sys.stderr)
             if not found:
                 raise FlighttestError(
                     f"{p}: no flight logs found (.tlog, .bin, .ulg, by name or content, or flighttest log folders)"
@@ -580,7 +582,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     why this log gives no onset to trust (exit 2, nothing stored): ``flighttest.analysis.identify``."""
     from flighttest.analysis.identify import IdentifyConfig, NoOnset, identify_onset, no_onset_line
     from flighttest.analysis.loaders import load_log
-    from flighttest.model.profiles import load_profile, write_w_allow
+    from flighttest.model.profiles import load_profile, w_allow_target, write_w_allow
 
     if not (math.isfinite(args.threshold) and 1.0 < args.threshold <= MAX_THRESHOLD_RATIO):
         raise FlighttestError(f"--threshold must be a number > 1 and at most {MAX_THRESHOLD_RATIO:g} "
@@ -589,6 +591,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
     profile = load_profile(args.vehicle)
     (args.log,) = _log_paths([args.log])
+    if args.write_profile:  # where the result would go, before the log is read: a result that cannot be stored
+        w_allow_target(profile)
     if args.drag:
         return _identify_drag(args, profile)
     prior = profile.w_allow_mps

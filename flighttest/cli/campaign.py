@@ -44,8 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("campaign", help="the whole field day: probe, identify, plan, fly vertical and helix, report",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     link = p.add_mutually_exclusive_group(required=True)
-    link.add_argument("--connect", metavar="URL",
-                      help="the vehicle: udpin://0.0.0.0:14540, serial:///dev/ttyUSB0:57600, …")
+    link.add_argument(
+        "--connect", metavar="URL", help="the vehicle: udpin://0.0.0.0:14540, serial:///dev/ttyUSB0:57600, …"
+    )
     link.add_argument("--sim", action="store_true", help="fly the built-in fake vehicle (started and stopped here)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="the campaign's folder")
     p.add_argument("--vehicle", metavar="NAME", help="vehicle profile name or .toml path (with --sim default x500)")
@@ -105,7 +106,7 @@ def _validate(args: argparse.Namespace) -> SimOptions | None:
     from flighttest.campaign.run import SIM_DEFAULT_PARAMS, SIM_DEFAULT_PARAMS_ARDUPILOT, SimOptions
     from flighttest.flying.link import check_connection, check_url
 
-    if args.connect:
+    if args.connect is not None:  # an empty URL is a link asked for, and refused by check_url
         check_url(args.connect)
         if not args.vehicle:
             raise FlighttestError("--vehicle is required with --connect (the profile of the aircraft you fly)")
@@ -125,7 +126,7 @@ def _validate(args: argparse.Namespace) -> SimOptions | None:
     for item in args.sim_param:
         name, value = _sim_param(item, ardupilot)
         params[name] = value
-    if args.connect:
+    if args.connect is not None:
         check_connection(args.connect)  # last: a host name may take a moment to resolve
         return None
     wind = tuple(args.sim_wind) if args.sim_wind else None
@@ -164,7 +165,8 @@ def _sim_param(item: str, ardupilot: bool = False) -> tuple[str, float]:
     except ValueError:
         kind = "a whole number" if known[name] else "a number"
         raise FlighttestError(f"--sim-param {name}: must be {kind} (got {shown(value)})") from None
-    if not (math.isfinite(number) and abs(number) <= 1e6):  # no PX4 parameter the fake has goes beyond
+    # the bound first: a whole number of 400 digits has no float for isfinite (OverflowError)
+    if not (abs(number) <= 1e6 and math.isfinite(number)):  # no PX4 parameter the fake has goes beyond
         raise FlighttestError(f"--sim-param {name}: must be a finite number of at most 1e6 (got {shown(value)})")
     return name, number
 

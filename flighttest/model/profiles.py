@@ -29,7 +29,9 @@ from flighttest.inputs import (
     W_ALLOW_POSITIVE_MPS,
     InputFileError,
     Range,
+    atomic_write,
     check_input_file,
+    check_output_path,
     check_text,
     did_you_mean,
     shown,
@@ -131,9 +133,7 @@ class VehicleProfile:
     def v_h_mps(self) -> float:
         """Hover induced velocity per rotor (CONVENTIONS §1), m/s."""
         return float(
-            aero.hover_induced_velocity_mps(
-                self.hover_thrust_per_rotor_n, self.air_density_kgpm3, self.disk_area_m2
-            )
+            aero.hover_induced_velocity_mps(self.hover_thrust_per_rotor_n, self.air_density_kgpm3, self.disk_area_m2)
         )
 
     @property
@@ -277,7 +277,7 @@ def _check_value(path, key: str, value: Any, kind) -> Any:
         return value
     if kind is _TEXT:
         try:
-            return check_text(value, "", max_chars=2000)
+            return check_text(value, "", max_chars=MAX_TEXT_CHARS)
         except FlighttestError as exc:
             raise _bad(path, key, str(exc).strip()) from None
     if not kind.ok(value):
@@ -286,6 +286,7 @@ def _check_value(path, key: str, value: Any, kind) -> Any:
 
 
 _NAME_BAD = re.compile(r"[/\\\x00-\x1f\x7f]")
+MAX_TEXT_CHARS = 2000  # a profile's free text (description, the boundary's source)
 
 
 def _check_derived(prof: VehicleProfile, path: Path | str) -> None:
@@ -310,8 +311,11 @@ def _check_derived(prof: VehicleProfile, path: Path | str) -> None:
             f"{MAX_V_H_MPS:g}; are the rotors too small for the mass, or the air too thin?)"
         )
     if figures["thrust_to_weight"] > MAX_THRUST_TO_WEIGHT:
-        raise _bad(path, "max_thrust_per_rotor_n",
-                   f"gives thrust/weight {figures['thrust_to_weight']:.3g} (at most {MAX_THRUST_TO_WEIGHT:g})")
+        raise _bad(
+            path,
+            "max_thrust_per_rotor_n",
+            f"gives thrust/weight {figures['thrust_to_weight']:.3g} (at most {MAX_THRUST_TO_WEIGHT:g})",
+        )
 
 
 def profile_from_dict(data: dict[str, Any], path: Path | str = "<profile>") -> VehicleProfile:
@@ -492,21 +496,13 @@ def write_drag(profile: VehicleProfile, drag: DragModel, target: Path | None = N
 
 
 def _write_profile(profile: VehicleProfile, updated: VehicleProfile, target: Path | None) -> Path:
-    """``updated`` written where a measured value of ``profile`` belongs: the user's copy (a shipped profile
-    is never edited), or ``target``; refused in one line where that is not a file one can write."""
-    if target is None:
-        src = Path(profile.path)
-        in_user_dir = src.parent.resolve() in {d.resolve() for d in user_dirs()}
-        target = src if in_user_dir else user_dirs()[0] / src.name
-    if target.exists() and not target.is_file():
-        raise FlighttestError(f"cannot write the profile to {target}: it is not a file")
+    """``updated`` written where a measured value of ``profile`` belongs (:func:`w_allow_target`)."""
+    target = w_allow_target(profile, target)
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = target.with_suffix(".toml.tmp")
-        tmp.write_text(tomli_w.dumps(profile_to_dict(updated)), encoding="utf-8")
-        tmp.replace(target)
+        with atomic_write(target) as tmp:
+            tmp.write_text(tomli_w.dumps(profile_to_dict(updated)), encoding="utf-8")
     except OSError as exc:
-        raise FlighttestError(f"cannot write the profile to {target} ({exc.strerror or exc})") from None
+        raise FlighttestError(f"cannot write the profile {target}: {exc.strerror or exc}") from None
     return target
 
 
@@ -523,13 +519,18 @@ def write_w_allow(profile: VehicleProfile, w_allow_mps: float, source: str, targ
             f"(must lie above {lo:.3f} m/s — the guard margin and a third of Onera's entry — and at most "
             f"{hi:.3f} m/s, 1.5× Onera's TWS entry; v_h {profile.v_h_mps:.2f} m/s)"
         )
+    # what the loader refuses is never stored: every later command would stop on the profile
+    source = check_text(source, "the w_allow source", max_chars=MAX_TEXT_CHARS)
     updated = replace(profile, vrs=replace(profile.vrs, w_allow_mps=float(w_allow_mps), source=source))
+    return _write_profile(profile, updated, target)
+
+
+def w_allow_target(profile: VehicleProfile, target: Path | str | None = None) -> Path:
+    """The file :func:`write_w_allow` writes (``target``, else the profile itself when it is a user copy, else
+    its copy in the first user folder), checked as an output: a folder there, a FIFO, a user folder that is
+    a file or not writable is one line — callers check it before the work whose result it stores."""
     if target is None:
         src = Path(profile.path)
         in_user_dir = src.parent.resolve() in {d.resolve() for d in user_dirs()}
         target = src if in_user_dir else user_dirs()[0] / src.name
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_suffix(".toml.tmp")
-    tmp.write_text(tomli_w.dumps(profile_to_dict(updated)), encoding="utf-8")
-    tmp.replace(target)
-    return target
+    return check_output_path(target, "the profile to write")

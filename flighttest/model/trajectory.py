@@ -273,9 +273,7 @@ class Trajectory:
         if isinstance(t_f, bool) or not isinstance(t_f, int | float) or not math.isfinite(t_f):
             raise FlighttestError(f"{where}: metadata 't_f_s' must be a finite number (got {shown(t_f)})")
         if abs(t_f - self.duration_s) > 0.05 + 0.01 * self.duration_s:
-            raise FlighttestError(
-                f"{where}: metadata t_f_s = {t_f:.6g} s but the samples last {self.duration_s:.6g} s"
-            )
+            raise FlighttestError(f"{where}: metadata t_f_s = {t_f:.6g} s but the samples last {self.duration_s:.6g} s")
         if _depth(meta) > MAX_META_DEPTH:
             raise FlighttestError(f"{where}: metadata nested deeper than {MAX_META_DEPTH} levels")
 
@@ -484,7 +482,17 @@ SAMPLE_MIN_GAP_FRACTION = 0.01
 
 def sample_times(t_f_s: float, rate_hz: float, breaks_s: tuple[float, ...] = ()) -> np.ndarray:
     """A ``rate_hz`` grid from 0 to ``t_f_s`` with the phase boundaries ``breaks_s`` and ``t_f_s`` in it,
-    strictly increasing by at least ``SAMPLE_MIN_GAP_FRACTION`` of a period."""
+    strictly increasing by at least ``SAMPLE_MIN_GAP_FRACTION`` of a period.
+
+    Refused (one line) before anything is allocated: a duration or rate that is not a positive finite
+    number, a duration beyond ``MAX_DURATION_S`` or more than ``MAX_ROWS`` samples — a plan made from a
+    near-zero speed or acceleration would otherwise ask for terabytes here."""
+    if not (math.isfinite(t_f_s) and t_f_s > 0 and math.isfinite(rate_hz) and rate_hz > 0):
+        raise FlighttestError(f"trajectory sampling: duration {t_f_s!r} s at {rate_hz!r} Hz (both must be > 0)")
+    if t_f_s > MAX_DURATION_S:
+        raise FlighttestError(f"trajectory sampling: lasts {t_f_s:.6g} s (at most {MAX_DURATION_S:g} s)")
+    if t_f_s * rate_hz + len(breaks_s) + 1 > MAX_ROWS:
+        raise FlighttestError(f"trajectory sampling: {t_f_s:.6g} s at {rate_hz:g} Hz is more than {MAX_ROWS:,} rows")
     grid = np.arange(0.0, t_f_s, 1.0 / rate_hz)
     keys = np.array([*breaks_s, t_f_s], dtype=float)
     near = np.min(np.abs(grid[:, None] - keys[None, :]), axis=1) < SAMPLE_MIN_GAP_FRACTION / rate_hz

@@ -68,6 +68,18 @@ def plan_probe(amplitude_m: float = 2.0, omega0_rps2: float = 0.05, ramp_s: floa
             f"probe: amplitude {amplitude_m:g} m would go below the altitude floor ({floor_alt_m:g} m; start at "
             f"{start_alt_m:g} m leaves {room:g} m)"
         )
+    # a ramp shorter than a sample divides by its square into infinite accelerations
+    if ramp_s < 1.0 / rate_hz:
+        raise FlighttestError(f"probe: ramp {ramp_s:.3g} s is shorter than one sample ({1.0 / rate_hz:g} s)")
+    if duration_s <= ramp_s:
+        raise FlighttestError(f"probe: duration {duration_s:.3g} s must be longer than the ramp ({ramp_s:g} s)")
+    # the chirp's phase ω0·t² must reach one cycle within the duration; a slower ω0 puts the phase's
+    # saturation ~1/ω0 seconds out, where its square overflows
+    if omega0_rps2 * duration_s * duration_s < 2 * math.pi:
+        raise FlighttestError(
+            f"probe: omega0 {omega0_rps2:.3g} rad/s² does not sweep one cycle in {duration_s:g} s (the phase ω0·t² "
+            f"must reach 2π: omega0 ≥ {2 * math.pi / (duration_s * duration_s):.3g} rad/s² for this duration)"
+        )
     if int(hold_cycles) != hold_cycles or hold_cycles < 0:
         raise FlighttestError(f"probe: hold cycles must be a whole number ≥ 0 (got {hold_cycles!r})")
     t = np.arange(0.0, duration_s + 0.5 / rate_hz, 1.0 / rate_hz)
@@ -115,8 +127,10 @@ def plan_probe(amplitude_m: float = 2.0, omega0_rps2: float = 0.05, ramp_s: floa
         "saturated_from_s": min(t_sat, float(t_end)),
         "max_accel_down_mps2": max_accel_down_mps2 if math.isfinite(max_accel_down_mps2) else None,
         "max_accel_up_mps2": max_accel_up_mps2 if math.isfinite(max_accel_up_mps2) else None,
-        "formula": "d = smoothstep(t/ramp) * A/2 * (1 - cos(phi)), phi' = min(2 omega0 t, saturated_rate) "
-                   "(NED down, one-sided)",
+        "formula": (
+            "d = smoothstep(t/ramp) * A/2 * (1 - cos(phi)), phi' = min(2 omega0 t, saturated_rate) "
+            "(NED down, one-sided)"
+        ),
     }
     return ProbePlan(t, d, v, a, float(t_end), k, top, firsts, problem)
 
@@ -124,14 +138,14 @@ def plan_probe(amplitude_m: float = 2.0, omega0_rps2: float = 0.05, ramp_s: floa
 def _phase(t, om0: float, rate_sat: float):
     """``φ(t)``: ``ω0·t²`` until its rate ``2ω0·t`` reaches ``rate_sat``, then linear."""
     t_sat = rate_sat / (2 * om0)
-    return np.where(t < t_sat, om0 * np.square(t), om0 * t_sat**2 + rate_sat * (t - t_sat))
+    return np.where(t < t_sat, om0 * np.square(t), om0 * t_sat * t_sat + rate_sat * (t - t_sat))
 
 
 def _phase_time(phase: float, om0: float, rate_sat: float) -> float:
     t_sat = rate_sat / (2 * om0)
-    if phase <= om0 * t_sat**2:
+    if phase <= om0 * t_sat * t_sat:
         return math.sqrt(phase / om0)
-    return t_sat + (phase - om0 * t_sat**2) / rate_sat
+    return t_sat + (phase - om0 * t_sat * t_sat) / rate_sat
 
 
 def _profile(t: np.ndarray, amp: float, om0: float, ramp: float, rate_sat: float = math.inf):

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flighttest.errors import FlighttestError
+from flighttest.inputs import MAX_DURATION_S
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import sample_times
 from flighttest.planner.autopilot_limits import capped, plan_limits
@@ -64,16 +65,29 @@ def plan_vertical(profile: VehicleProfile, height_m: float = 5.0, w_allow_mps: f
     a_dn = capped(accel_fraction * profile.max_accel_down_mps2, limits.accel_z_max_mps2)
     a_up = capped(accel_fraction * profile.max_accel_up_mps2, limits.accel_z_max_mps2)
     jerk = limits.jerk_z_max_mps3 or math.inf
+    cruise_cap = cruise
     if _ramps(cruise, a_dn, a_up, jerk)[2] > height_m:  # too short to reach cruise: the fastest peak that fits
         lo, hi = 0.0, cruise
         for _ in range(60):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if _ramps(mid, a_dn, a_up, jerk)[2] <= height_m else (lo, mid)
         cruise = lo
+    # a near-zero acceleration (fraction) or descent speed makes the descent last for ever: refused here,
+    # before the bisection's peak rounds to 0 (a division by zero) or the sampling asks for terabytes
+    given = (
+        f"with a cruise of at most {cruise_cap:.3g} m/s and accelerations {a_dn:.3g} down / {a_up:.3g} up m/s²"
+        + (f" changing at {jerk:.3g} m/s³" if math.isfinite(jerk) else "")
+        + " (raise the accel fraction, the descent speed or the autopilot's limits in the profile)"
+    )
+    if not cruise > 0:
+        raise FlighttestError(f"vertical plan: {height_m:g} m would take more than {MAX_DURATION_S:g} s {given}")
     down, up, d_ramps = _ramps(cruise, a_dn, a_up, jerk)
     t1 = down.duration_s
     t2 = t1 + (height_m - d_ramps) / cruise
     t_f = t2 + up.duration_s
+    if not t_f <= MAX_DURATION_S:
+        took = f"{t_f:.4g} s (at most {MAX_DURATION_S:g})"
+        raise FlighttestError(f"vertical plan: {height_m:g} m would take {took} {given}")
     t = sample_times(t_f, rate_hz, (*down.breaks_s, t1, t2, *(t2 + b for b in up.breaks_s)))
     a_acc, v_acc, d_acc = down.at(np.minimum(t, t1))
     tau = np.clip(t - t2, 0.0, up.duration_s)  # time into the braking
@@ -115,7 +129,8 @@ class _SpeedRamp:
 
     @property
     def duration_s(self) -> float:
-        return self.speed_mps / self.accel_mps2 + self.ramp_s
+        # a jerk limit near zero leaves a peak acceleration of 0: never reached, not a division by zero
+        return self.speed_mps / self.accel_mps2 + self.ramp_s if self.accel_mps2 > 0 else math.inf
 
     @property
     def distance_m(self) -> float:  # the speed is point-symmetric about the ramp's middle

@@ -1,5 +1,8 @@
 """Logs of known motion in every supported format, for tests and the benchmark.
 
+A test helper, not part of the installed package (the wheel leaves ``tests/`` out): the tests import it as
+``synthetic`` (pytest puts ``tests/`` on ``sys.path``), ``bench/bench_analysis.py`` adds ``tests/`` itself.
+
 :class:`SyntheticFlight` is a closed-form flight: hover at ``start_alt_m``, then descents (a
 raised-cosine vertical speed profile, so a descent of height H in D seconds peaks at πH/(2D); a
 negative H is a climb, so a flight can take off from and land on the ground) or a probe
