@@ -408,8 +408,8 @@ def test_preflight_refuses_a_trajectory_that_needs_more_height(fake_vehicle_fact
                          "--config", str(cfg))  # fmt: skip
     assert rc == 2
     assert "preflight failed: height" in err and "Traceback" not in err
-    assert s["outcome"] == "refused"
-    pre = json.loads((Path(s["log_dir"]) / "preflight.json").read_text())
+    assert s["outcome"] == "refused" and s["log_dir"] is None  # never armed: no flight folder
+    pre = s["preflight"]
     assert not pre["ok"] and any(c["name"] == "height" and c["status"] == "fail" for c in pre["checks"])
     tr = truth(fake)
     assert not ((tr["kind"] == "command") & tr["detail"].astype(str).str.contains("ARM")).any()

@@ -43,6 +43,7 @@ TEXT_COLUMNS = {"setpoints.csv": {"phase"}, "guard.csv": {"verdict", "action", "
 # event fields with a unit are numbers; of those, these are spans that cannot be negative
 _UNIT_FIELD = re.compile(r"_(s|ms|m|mps|mps2|hz|dps|deg|pct)$")
 _NON_NEGATIVE_FIELD = re.compile(r"(^|_)(time|duration|elapsed|error|distance|jitter)(_[a-z0-9]+)*_(s|ms|m)$")
+SIGNED_FIELDS = frozenset({"height_error_m"})  # descent_reached: d − d_end, > 0 below the end point
 
 
 def is_log_folder(path: Path) -> bool:
@@ -164,7 +165,8 @@ def _clean_event(ev: dict, dropped: dict[str, int]) -> dict:
         if isinstance(value, dict):  # a record of its own (the collector's per-generation max_ms)
             out[key] = value
             continue
-        bad = not _finite(value) or (_NON_NEGATIVE_FIELD.search(key) is not None and value < 0)
+        negative_span = _NON_NEGATIVE_FIELD.search(key) is not None and key not in SIGNED_FIELDS
+        bad = not _finite(value) or (negative_span and value < 0)
         if _UNIT_FIELD.search(key) and value is not None and bad:
             dropped[key] = dropped.get(key, 0) + 1
             continue
