@@ -152,6 +152,7 @@ class ScriptedAutopilot:
         self.telemetry_on = True
         self.attitude_on = True
         self.telemetry_delay_s = 0.0
+        self.telemetry_delay_growth = 0.0
         self._history: list[tuple[float, np.ndarray, np.ndarray]] = []  # (t, p, v): what a late stream shows
         self.wind_report: tuple[float, float, float] | None = None
         self.wind_accuracy_mps = math.nan
@@ -208,10 +209,11 @@ class ScriptedAutopilot:
         """The attitude stream alone stops; position-velocity and the IMU keep coming."""
         self.attitude_on = False
 
-    def delay_telemetry(self, delay_s: float) -> None:
-        """From now on every state sample arrives ``delay_s`` late, at the same steady rate, stamped with the
-        vehicle's time of the state it carries (a queue building up somewhere on the link)."""
-        self.telemetry_delay_s = delay_s
+    def delay_telemetry(self, growth_per_s: float) -> None:
+        """From now on the link falls behind: each state sample arrives at the same steady rate, stamped with
+        the vehicle's time of the state it carries, but the queue before it grows by ``growth_per_s`` seconds
+        each second (a link that delivers less than the vehicle sends)."""
+        self.telemetry_delay_growth = growth_per_s
 
     def report_wind(self, wind_ned_mps: tuple[float, float, float] | None, accuracy_mps: float = math.nan) -> None:
         """The autopilot's wind estimate (WIND_COV) from now on; None: it stops reporting one."""
@@ -502,6 +504,7 @@ class ScriptedAutopilot:
                 self._emit(self.on_mode, old, self.mode)
         if not self.telemetry_on:
             return
+        self.telemetry_delay_s += self.telemetry_delay_growth / self.telemetry_hz
         self._history.append((now, self.p_ned.copy(), self.v_ned.copy()))
         while len(self._history) > 1 and self._history[0][0] < now - HISTORY_S:
             self._history.pop(0)

@@ -146,14 +146,34 @@ def test_an_attitude_stream_that_stops_mid_descent_aborts_and_the_sink_is_not_ca
     assert f.ladder()[-1] == ("DONE", "landed") and not f.ap.armed
 
 
-def test_a_steady_stream_that_arrives_late_is_stale(tmp_path):
-    # every sample keeps coming at 50 Hz, but from half a second ago (the vehicle's own timestamps say so)
+def test_a_steady_stream_that_falls_behind_is_stale(tmp_path):
+    # every sample keeps coming at 50 Hz, but the link delivers ever older ones: 0.3 s more each second (the
+    # vehicle's own timestamps say so; no gap in the arrivals shows it)
     def script(ap, runner):
-        ap.after(in_phase(runner, "stream"), 1.0, lambda: ap.delay_telemetry(0.5))
+        ap.after(in_phase(runner, "stream"), 1.0, lambda: ap.delay_telemetry(0.3))
 
     f = fly(tmp_path, script)
     assert f.summary["abort_verdict"] == gd.STALE and "arrives" in f.outcome.abort_reason
-    assert f.t_of("abort") - f.t_of("phase", phase="stream") - 1.0 <= 0.1
+    assert 0.8 <= f.t_of("abort") - f.t_of("phase", phase="stream") - 1.0 <= 1.0  # 0.25 s behind: 0.83 s
+
+
+def test_a_simulator_that_stalls_and_resumes_is_not_late():
+    # a starved simulator stops its own clock during the stall: after it, every sample is as fresh as ever,
+    # arriving at its cadence with the offset the stall left (ArduCopter SITL: 0.36 s)
+    guard = gd.Guard(gd.GuardLimits(region=X500.guard_region()))
+    t, tv = 100.0, 5.0
+    for _ in range(100):
+        t, tv = t + 0.02, tv + 0.02
+        guard.note_attitude(t, tv)
+    t += 0.36  # the stall: nothing arrives, the vehicle's clock stands still
+    for _ in range(100):
+        t, tv = t + 0.02, tv + 0.02
+        guard.note_attitude(t, tv)
+        assert guard.lateness_s < 0.01
+    for _ in range(50):  # then the link falls behind at its cadence: 10 ms more per sample
+        t, tv = t + 0.03, tv + 0.02
+        guard.note_attitude(t, tv)
+    assert guard.lateness_s == pytest.approx(0.5, abs=0.01)
 
 
 # -- 4. a log that cannot be written --------------------------------------------------------------------

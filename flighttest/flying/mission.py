@@ -199,6 +199,8 @@ def with_descent(cfg: MissionConfig, descent_m: float | None, target: str, name:
     file (and a helix config flying a planned file): their descent is in the file."""
     if descent_m is None:
         return cfg
+    if cfg.mission == "drag":
+        raise FlighttestError(f"{name} does not apply to the drag calibration: it flies level")
     if cfg.mission not in DESCENT_KEYS:
         raise FlighttestError(
             f"{name} does not apply to a trajectory file ({target}): its descent is in the file "
