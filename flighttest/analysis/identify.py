@@ -178,26 +178,26 @@ class ProbeWind:
         w = self.wind_ned_mps
         return math.hypot(w[0], w[1]) if w is not None else math.nan
 
-    def note(self) -> str:
+    def note(self, what: str = "the onset found") -> str:
         """"flown in X m/s of wind (source): the onset found is for that air" with what the air was."""
         if self.wind_source is None:
             return "wind not resolved"
         if self.wind_ned_mps is None or not math.isfinite(self.speed_mps):
-            return f"wind unknown ({self.wind_source}): the onset assumes still air"
+            return f"wind unknown ({self.wind_source}): {what} assumes still air"
         known = self.wind_sd_mps is not None and math.isfinite(self.wind_sd_mps)
         sd = f" ± {self.wind_sd_mps:.2f}" if known else ""
-        return (f"flown in {self.speed_mps:.2f}{sd} m/s of wind ({self.wind_source}): the onset found is for that "
+        return (f"flown in {self.speed_mps:.2f}{sd} m/s of wind ({self.wind_source}): {what} is for that "
                 f"air ({self.in_plane_air_mps:.2f} m/s across the disk; its uncertainty adds "
                 f"±{self.wind_uncertainty_mps:.3f} m/s; Onera puts the straight-down entry "
                 f"{self.onera_shift_mps:+.3f} m/s from there)")  # fmt: skip
 
-    def summary(self) -> dict:
+    def summary(self, what: str = "the onset found") -> dict:
         speed = self.speed_mps
         return {"wind_ned_mps": list(self.wind_ned_mps) if self.wind_ned_mps else None,
                 "wind_speed_mps": speed if math.isfinite(speed) else None,
                 "wind_sd_mps": self.wind_sd_mps, "wind_source": self.wind_source,
                 "in_plane_air_mps": self.in_plane_air_mps, "wind_uncertainty_mps": self.wind_uncertainty_mps,
-                "onera_shift_mps": self.onera_shift_mps, "wind_note": self.note()}  # fmt: skip
+                "onera_shift_mps": self.onera_shift_mps, "wind_note": self.note(what)}  # fmt: skip
 
 
 def onera_entry_n(v_H_n: float, profile: VehicleProfile, step_n: float = 0.0005) -> float:
@@ -273,7 +273,7 @@ class NoOnset(FlighttestError):
             "threshold_ratio": self.threshold_ratio, "max_speed_mps": self.max_speed_mps,
             "rise_ratio": self.rise_ratio, "samples": self.samples, "signals": list(self.signals),
             "probe_evidence": self.evidence, "reason": str(self),
-            **(self.wind.summary() if self.wind is not None else {}),
+            **(self.wind.summary("the lower bound") if self.wind is not None else {}),
         }  # fmt: skip
 
 

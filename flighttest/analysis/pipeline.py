@@ -20,6 +20,7 @@ the guard region can be entered outside any descent, as a helix aborted 0.3 s in
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -91,8 +92,9 @@ class Analysis:
         }
 
 
-# the wind each descent was judged with: its mean over the descent, the RMS of its 1 σ, its source
-DESCENT_WIND = ["wind_n_mps", "wind_e_mps", "wind_d_mps", "wind_sd_mps", "wind_source"]
+# the wind each descent was judged with: its mean over the descent (and its horizontal speed), the RMS of
+# its 1 σ, its source
+DESCENT_WIND = ["wind_n_mps", "wind_e_mps", "wind_d_mps", "wind_speed_mps", "wind_sd_mps", "wind_source"]
 
 
 def descent_wind(wind: wind_mod.LogWind | None, sel: np.ndarray) -> dict:
@@ -100,7 +102,9 @@ def descent_wind(wind: wind_mod.LogWind | None, sel: np.ndarray) -> dict:
     if wind is None or not sel.any():
         return dict.fromkeys(DESCENT_WIND)
     o = wind.over(sel)
-    return dict(zip(DESCENT_WIND, [*o["wind_ned_mps"], o["wind_sd_mps"], o["wind_source"]]))
+    n, e, d = o["wind_ned_mps"]
+    speed = math.hypot(n, e) if n is not None else None
+    return dict(zip(DESCENT_WIND, [n, e, d, speed, o["wind_sd_mps"], o["wind_source"]]))
 
 
 def resolve_profile(log: FlightLog, vehicle: str | None) -> tuple[VehicleProfile | None, list[str]]:

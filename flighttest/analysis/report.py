@@ -40,6 +40,7 @@ TABLE_COLUMNS = {
     "time_inside_worst_s": "inside, worst air s",
     "time_near_s": "near s",
     "min_margin_mps": "min margin m/s",
+    "wind_speed_mps": "wind m/s",
     "fluct_index_max": "fluct. max",
     "phase": "phase",
 }

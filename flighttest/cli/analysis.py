@@ -636,7 +636,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         console.print(line)
         console.print(f"[dim]{none} — {none.samples} samples; {none.evidence}[/]")
         if none.wind is not None:
-            console.print(f"the sweep was {none.wind.note()}", markup=False)
+            console.print(f"the sweep was {none.wind.note('the lower bound')}", markup=False)
         if args.write_profile:
             console.print("nothing stored: there is no onset to store (the profile keeps its prior)")
         return 0
