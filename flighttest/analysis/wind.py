@@ -100,8 +100,9 @@ class LogWind:
 # -- where the vehicle is in the air ----------------------------------------------------------------
 def airborne_mask(state: pd.DataFrame) -> np.ndarray:
     """Samples with the vehicle in the air: not reported on the ground (``landed`` 1 or disarmed) and at
-    least ``AIRBORNE_MIN_HEIGHT_M`` above the ground, the median height while it was on the ground (else
-    the log's lowest heights, its 2nd percentile)."""
+    least ``AIRBORNE_MIN_HEIGHT_M`` above the ground: the median height while it was reported there (an
+    estimator drifts on the ground by up to a metre), else home (the state's height, once
+    :func:`flighttest.analysis.pipeline.prepare_state` has arbitrated it, is metres above home)."""
     n = len(state)
     h = -state["d_m"].to_numpy(float)
     landed = state["landed"].to_numpy(float) if "landed" in state else np.full(n, np.nan)
@@ -111,7 +112,7 @@ def airborne_mask(state: pd.DataFrame) -> np.ndarray:
     if not fin.any():
         return np.zeros(n, bool)
     rest = ground_said & fin
-    ground = float(np.median(h[rest])) if rest.sum() >= 10 else float(np.percentile(h[fin], 2))
+    ground = float(np.median(h[rest])) if rest.sum() >= 10 else 0.0
     return fin & ~ground_said & (h > ground + AIRBORNE_MIN_HEIGHT_M)
 
 
