@@ -154,6 +154,8 @@ def _logged(log: FlightLog) -> LogWind | None:
     wi = resample(tm, w_g[measured], t, LOGGED_MAX_GAP_S)
     si = resample(tm, sd_g[measured], t, LOGGED_MAX_GAP_S)
     gap = ~np.isfinite(wi).all(axis=1)
+    if gap.all():
+        return None  # no row near the telemetry: a guard.csv of another clock, not this flight's wind
     if gap.any():
         wi = _nearest_fill(t, wi, ~gap)
         si = np.where(gap, np.maximum(_nearest_fill(t, si, ~gap), REPORT_SD_UNKNOWN_MPS), si)
@@ -182,6 +184,8 @@ def _reported(log: FlightLog) -> tuple[LogWind | None, list[str]]:
     wi = resample(rep.t_s[ok], rep.ned_mps[ok], t, REPORT_MAX_GAP_S)
     si = resample(rep.t_s[ok], sd[ok], t, REPORT_MAX_GAP_S)
     gap = ~np.isfinite(wi).all(axis=1)
+    if gap.all():
+        return None, [f"the autopilot's wind ({rep.name}) lies outside the telemetry's time: not used"]
     notes = []
     if gap.any():
         wi = _nearest_fill(t, wi, ~gap)
