@@ -39,7 +39,7 @@ import numpy as np
 
 from flighttest.analysis.schema import ISA_SEA_LEVEL_PA
 from flighttest.model.aero import G_MPS2
-from flighttest.model.frames import EARTH_RADIUS_M, quat_from_euler, quat_to_euler
+from flighttest.model.frames import EARTH_RADIUS_M, ned_to_body, quat_from_euler, quat_to_euler
 
 G = G_MPS2
 UNIX0 = 1_767_225_600.0  # 2026-01-01, the wall clock of synthetic tlogs
@@ -104,6 +104,14 @@ class SyntheticFlight:
     fluct_gain: float = 2.0  # rate-noise amplitude per m/s beyond the onset, rad/s
     base_noise: float = 0.01
     wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # the IMU feels the air's drag across the thrust axis: −drag_per_s × the air-relative body velocity
+    # (x500: 1 N per m/s on 2 kg), so flighttest's wind estimator finds the wind the flight flew in
+    drag_per_s: float = 0.5
+    # the autopilot's wind report (WIND_COV, WIND, the ulog's wind topic, DataFlash XKF2): its estimate (the
+    # true wind), or exact zeros as an estimator that does not estimate the wind sends (PX4's EKF2 and
+    # ArduPilot's EKF3 by default on a multicopter); its stated 1 σ (0: none given)
+    wind_reported: bool = True
+    wind_report_sd_mps: float = 0.0
     glitch: tuple[float, float] | None = None  # (t, seconds) altitude jumps 40 m below ground
     # estimator height below the truth, growing linearly from the first value (t = 0) to the second (end), m
     ekf_offset_m: tuple[float, float] | None = None
@@ -222,6 +230,9 @@ class SyntheticFlight:
             return sum(np.sin(2 * np.pi * f * t + k * 1.7 + i) for i, f in enumerate((7.3, 11.1, 13.7))) / 2.0
 
         q = quat_from_euler(np.zeros_like(t), np.zeros_like(t), np.full_like(t, math.radians(self.yaw_deg)))
+        wn, we, wd = self.wind_ned_mps
+        bx, by, _ = ned_to_body(-wn + 0.0 * t, ve - we, vd_true - wd, q[:, 0], q[:, 1], q[:, 2], q[:, 3])
+        fx, fy = -self.drag_per_s * bx, -self.drag_per_s * by
         thrust = 0.5 * (1 - ad / G)
         out = {
             "t": t,
@@ -241,8 +252,8 @@ class SyntheticFlight:
             "p": amp * wobble(0),
             "q_rate": amp * wobble(1),
             "r": 0.3 * amp * wobble(2),
-            "fx": np.zeros_like(t),
-            "fy": np.zeros_like(t),
+            "fx": fx,
+            "fy": fy,
             "fz": ad - G + 5 * amp * wobble(3),
         }
         out["armed"] = self.armed(t)
@@ -259,8 +270,8 @@ TLOG_STREAMS = ("pos", "att", "imu", "servo", "heartbeat", "wind")
 # what a height-fault flight adds by default: the streams that show the truth, and the parameters
 TLOG_HEIGHT_STREAMS = ("global", "altitude", "baro", "gps", "params")
 # every stream write_tlog knows ("att_euler": ATTITUDE; "range": DISTANCE_SENSOR, downward; "landed":
-# EXTENDED_SYS_STATE at 1 Hz)
-TLOG_ALL_STREAMS = (*TLOG_STREAMS, *TLOG_HEIGHT_STREAMS, "att_euler", "range", "landed")
+# EXTENDED_SYS_STATE at 1 Hz; "wind_ardupilot": ArduPilot's WIND at 1 Hz, the direction it comes from)
+TLOG_ALL_STREAMS = (*TLOG_STREAMS, *TLOG_HEIGHT_STREAMS, "att_euler", "range", "landed", "wind_ardupilot")
 _SENSOR_RATES_HZ = {"altitude": 10.0, "baro": 10.0, "gps": 5.0, "range": 10.0}
 
 
@@ -304,7 +315,10 @@ def write_tlog(
         raise ValueError(f"autopilot must be 'px4' or 'ardupilot' (got {autopilot!r})")
     px4 = autopilot == "px4"
     path = Path(path)
+    from pymavlink.dialects.v20 import ardupilotmega
+
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    apm = ardupilotmega.MAVLink(None, srcSystem=1, srcComponent=1)  # its WIND message
     gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     t = np.arange(0.0, flight.duration_s, 1.0 / rate_hz)
     s = flight.states(t)
@@ -348,8 +362,13 @@ def write_tlog(
             if "landed" in streams:
                 landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND if s["landed"][i] else mavlink.MAV_LANDED_STATE_IN_AIR
                 add(ts + mav.extended_sys_state_encode(0, landed_state).pack(mav))
+            w = wind if flight.wind_reported else (0.0, 0.0, 0.0)
             if "wind" in streams:
-                add(ts + mav.wind_cov_encode(ms * 1000, wind[0], wind[1], wind[2], 0, 0, 0, 0, 0).pack(mav))
+                sd = flight.wind_report_sd_mps
+                add(ts + mav.wind_cov_encode(ms * 1000, w[0], w[1], w[2], sd * sd, 0, 0, sd, 0).pack(mav))
+            if "wind_ardupilot" in streams:
+                from_deg = math.degrees(math.atan2(-w[1], -w[0])) if w[0] or w[1] else 0.0
+                add(ts + apm.wind_encode(from_deg, math.hypot(w[0], w[1]), 0.0).pack(apm))
         if "pos" in streams:
             add(
                 ts
@@ -452,6 +471,10 @@ _ULOG_TOPICS = {  # name: (format, rate Hz)
         "uint64_t timestamp;float min_distance;float max_distance;float current_distance;uint8_t orientation;",
         10.0,
     ),
+    "wind": (
+        "uint64_t timestamp;float windspeed_north;float windspeed_east;float variance_north;float variance_east;",
+        5.0,
+    ),
 }
 # before PX4 1.14 the GPS topic carried integer lat/lon (1e-7 deg) and alt (mm)
 _ULOG_GPS_OLD = "uint64_t timestamp;int32_t lat;int32_t lon;int32_t alt;uint8_t fix_type;"
@@ -496,6 +519,8 @@ def _ulog_body(name: str, ts: int, s: dict[str, np.ndarray], i: int, old_gps: bo
         if old_gps:
             return struct.pack("<QiiiB", ts, round(s["lat"][i] * 1e7), round(s["lon"][i] * 1e7), round(alt * 1000), fix)
         return struct.pack("<QdddB", ts, s["lat"][i], s["lon"][i], alt, fix)
+    if name == "wind":
+        return struct.pack("<Q4f", ts, s["wind_n"][i], s["wind_e"][i], s["wind_var"][i], s["wind_var"][i])
     if name == "distance_sensor":
         r = s["alt_range"][i]
         r = RANGEFINDER_MAX_M if not np.isfinite(r) else r
@@ -536,6 +561,9 @@ def write_ulog(
         rate = _ULOG_TOPICS[name][1]
         t = np.arange(0.0, flight.duration_s, 1.0 / rate) + 0.37 / rate  # offset: streams do not coincide
         s = flight.states(t)
+        reported = flight.wind_ned_mps if flight.wind_reported else (0.0, 0.0, 0.0)
+        s["wind_n"], s["wind_e"] = np.full(len(t), reported[0]), np.full(len(t), reported[1])
+        s["wind_var"] = np.full(len(t), flight.wind_report_sd_mps**2)
         s["lat"] = LAT0_DEG + s["n"] / M_PER_DEG
         s["lon"] = LON0_DEG + s["e"] / (M_PER_DEG * math.cos(math.radians(LAT0_DEG)))
         for i in range(len(t)):
@@ -567,8 +595,10 @@ _DF_MESSAGES = {  # name: (type id, format, columns)
     "XKQ": (140, "QBffff", "TimeUS,C,Q1,Q2,Q3,Q4"),
     "XKF1": (141, "QBffffff", "TimeUS,C,PN,PE,PD,VN,VE,VD"),
     "RFND": (142, "QBCBB", "TimeUS,Instance,Dist,Stat,Orient"),
+    "XKF2": (143, "QBff", "TimeUS,C,VWN,VWE"),
 }
-# the default records; "AHR2", "XKQ" (attitude without ATT), "XKF1" (EKF position) and "RFND" on request
+# the default records; "AHR2", "XKQ" (attitude without ATT), "XKF1" (EKF position), "XKF2" (its wind) and
+# "RFND" on request
 DF_RECORDS = ("ATT", "POS", "CTUN", "IMU", "RCOU", "BARO", "GPS", "PARM")
 ARDUCOPTER_GUIDED = 4
 RFND_GOOD, RFND_OUT_OF_RANGE_LOW, RFND_OUT_OF_RANGE_HIGH = 4, 2, 3
@@ -653,6 +683,10 @@ def write_dataflash(
         if "XKF1" in want:
             out.append(rec("XKF1", u, 0, s["n"][i], s["e"][i], s["d"][i], s["vn"][i], s["ve"][i], s["vd"][i]))
             out.append(rec("XKF1", u, 1, 0.0, 0.0, s["d"][i] + 50.0, 0.0, 0.0, 0.0))  # core 1: wrong
+        if "XKF2" in want:
+            w = flight.wind_ned_mps if flight.wind_reported else (0.0, 0.0, 0.0)
+            out.append(rec("XKF2", u, 0, w[0], w[1]))
+            out.append(rec("XKF2", u, 1, 9.0, 9.0))  # core 1: wrong
         if "POS" in want:
             out.append(rec("POS", u, lat, lon, HOME_AMSL_M + alt_up, alt_up, alt_up))
         if "CTUN" in want:

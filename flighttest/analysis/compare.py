@@ -22,6 +22,8 @@ COMPARE_KEYS = (
     "min_margin_mps",
     "time_vrs_s",
     "fluct_index_max",
+    "time_inside_worst_s",
+    "min_margin_worst_mps",
 )
 
 
@@ -100,6 +102,20 @@ def flight_outcome(meta: dict | None) -> str | None:
     return outcome if isinstance(outcome, str) and outcome else None
 
 
+def descent_wind_keys(d: pd.Series) -> dict:
+    """The wind a descent was judged with (its ``wind_n/e/d_mps``, ``wind_sd_mps``, ``wind_source``
+    columns, :mod:`flighttest.analysis.pipeline`) as ``wind_ned_mps`` [n, e, d], ``wind_speed_mps``
+    (horizontal), ``wind_sd_mps`` and ``wind_source``; the keys with None where the descent has none."""
+    ned = [d.get(k) for k in ("wind_n_mps", "wind_e_mps", "wind_d_mps")]
+    ok = all(isinstance(x, int | float) and math.isfinite(x) for x in ned)
+    sd = d.get("wind_sd_mps")
+    src = d.get("wind_source")
+    return {"wind_ned_mps": [float(x) for x in ned] if ok else None,
+            "wind_speed_mps": math.hypot(ned[0], ned[1]) if ok else None,
+            "wind_sd_mps": float(sd) if isinstance(sd, int | float) and math.isfinite(sd) else None,
+            "wind_source": src if isinstance(src, str) else None}  # fmt: skip
+
+
 def compare_row(
     log: str,
     descents: pd.DataFrame,
@@ -107,8 +123,9 @@ def compare_row(
     meta: dict | None = None,
     params: dict | None = None,
 ) -> dict:
-    """One row of ``flighttest compare``: the log, how many descents, its main descent's figures
-    (``main_descent_note`` says why there is none: only the abort ladder's descents) and, for
+    """One row of ``flighttest compare``: the log, how many descents, its main descent's figures and the
+    wind it was judged with (:func:`descent_wind_keys`; ``main_descent_note`` says why there is none:
+    only the abort ladder's descents) and, for
     flighttest's own logs, ``descent_time_s`` and ``horizontal_error_m`` (see ``flown_descent``).
 
     Given the log's ``meta`` the row gets ``outcome`` (:func:`flight_outcome`); given its parameters,
@@ -120,6 +137,7 @@ def compare_row(
     p = primary_descent(descents, events)
     if p is not None:
         row.update({k: p.get(k) for k in COMPARE_KEYS})
+        row.update(descent_wind_keys(p))
     elif len(descents):  # no main descent: the flight's mission and trajectory still say what it was
         row.update({k: descents.iloc[0].get(k) for k in ("mission", "trajectory")})
     row["main_descent_note"] = no_main_descent_why(descents, events)

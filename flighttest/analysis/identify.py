@@ -58,24 +58,45 @@ An onset is reported only when the fitted fluctuation at the fastest descent flo
 - *No onset up to the top speed* (:class:`NoOnset`) is a result, not a failure: the sweep was flown
   and stayed quiet up to ``lower_bound_mps``, so the onset lies above it; callers keep the prior
   ``w_allow``.
+- *Not in more wind than it can correct for* (:class:`WindyProbe`, an :class:`ImplausibleOnset`). ``w``
+  is air-relative with the log's wind (:mod:`flighttest.analysis.wind`: what flighttest flew with, the
+  autopilot's estimate, or flighttest's own from the IMU's drag), and every result says the wind the
+  probe was flown in ("the onset found is for that air"). The correction has two limits, each held to
+  the identification's own tolerance, ``MAX_RELATIVE_UNCERTAINTY`` (25 %) of the onset, at the samples
+  the onset is read from (descending within ``ONSET_BAND_MPS`` of it):
+
+  1. *the wind's uncertainty*: a horizontal wind error δ moves ``w`` by ``sin(tilt)·δ``
+     (:func:`flighttest.model.frames.worst_blade_velocity_mps`), so the onset is uncertain by
+     ``sin(tilt)·σ_wind`` besides the fit's own spread — added to its uncertainty in quadrature
+     (``wind_uncertainty_mps``), and alone beyond the tolerance the probe is refused;
+  2. *the in-plane air*: a probe holding its position in wind has the wind across its disk (``u``), and
+     in-plane air moves the VRS entry itself (Onera's criterion, the model the guard's region comes
+     from: at ``v_h`` 5.6 m/s, 1 m/s of it moves the straight-down entry by 3 %, 3 m/s by 28 %). The
+     onset stored is the profile's straight-down ``w_allow``: where the model says the probe's
+     in-plane air moved it by more than the tolerance (``onera_shift_mps``), the onset found is not that
+     one, and the probe is refused. A quieter day, or a probe flown into the wind, fixes both.
+  A log whose wind is unknown (still air assumed) is identified as before, and says so.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from flighttest.analysis import wind as wind_mod
 from flighttest.analysis.exposure import velocity_track
 from flighttest.analysis.fluctuation import FluctuationConfig, hover_mask
 from flighttest.analysis.pipeline import prepare_state
 from flighttest.analysis.schema import RATES, FlightLog
 from flighttest.errors import FlighttestError
 from flighttest.inputs import MAX_SPEED_MPS, display_path, shown
+from flighttest.model import aero
+from flighttest.model.frames import disk_tilt_sin
 from flighttest.model.profiles import VehicleProfile, plausible_w_allow_range
 
 PROBE_PHASES = ("settle", "stream")
@@ -106,6 +127,7 @@ MAX_PROBE_SPEED_MPS = MAX_SPEED_MPS
 # this the fit (a hundred bootstrap refits) would take most of an hour and gigabytes
 MAX_FIT_CELLS = 20_000_000
 PROVENANCE_PATH_CHARS = 400  # of the probe log's path in a stored w_allow's source line (within 2000 chars)
+ONSET_BAND_MPS = 0.1  # the samples an onset is read from: descending within this of it
 MAX_SWEEP_GAP_S = 1.0  # a telemetry gap this long inside the sweep: the log is damaged, not a slow link
 
 
@@ -135,6 +157,102 @@ def untrusted_onset_line(bad: ImplausibleOnset, prior_mps: float) -> str:
             f"({'; '.join(bad.reasons)}): w_allow stays at prior {prior_mps:.3f} m/s, inside that band")  # fmt: skip
 
 
+class WindyProbe(ImplausibleOnset):
+    """The probe was flown in more wind than identify can correct for (module docstring): the fit's onset
+    ``w_onset_mps`` ± ``uncertainty_mps`` is for air it cannot vouch for; ``wind`` describes it."""
+
+    def __init__(self, message: str, w_onset_mps: float, uncertainty_mps: float, reasons: tuple[str, ...],
+                 wind: dict) -> None:  # fmt: skip
+        super().__init__(message, w_onset_mps, uncertainty_mps, reasons)
+        self.wind = wind
+
+
+@dataclass(frozen=True)
+class ProbeWind:
+    """The air the probe was flown in, at the samples an onset is read from: the wind (its mean there, 1 σ,
+    source), the in-plane air ``u`` across the disk, the tilt's sine, and what they do to the onset."""
+
+    wind_ned_mps: tuple[float, float, float] | None
+    wind_sd_mps: float | None  # NaN/None: unknown (still air assumed)
+    wind_source: str | None
+    in_plane_air_mps: float  # median u there
+    tilt_sin: float  # median sin(tilt) there
+    wind_uncertainty_mps: float  # sin(tilt)·σ_wind: what the wind's uncertainty does to w there (NaN: unknown)
+    onera_shift_mps: float  # how far Onera's VRS entry at that u lies from the straight-down one
+
+    @property
+    def speed_mps(self) -> float:
+        w = self.wind_ned_mps
+        return math.hypot(w[0], w[1]) if w is not None else math.nan
+
+    def note(self, what: str = "the onset found") -> str:
+        """"flown in X m/s of wind (source): the onset found is for that air" with what the air was."""
+        if self.wind_source is None:
+            return "wind not resolved"
+        if self.wind_ned_mps is None or not math.isfinite(self.speed_mps):
+            return f"wind unknown ({self.wind_source}): {what} assumes still air"
+        known = self.wind_sd_mps is not None and math.isfinite(self.wind_sd_mps)
+        sd = f" ± {self.wind_sd_mps:.2f}" if known else ""
+        return (f"flown in {self.speed_mps:.2f}{sd} m/s of wind ({self.wind_source}): {what} is for that "
+                f"air ({self.in_plane_air_mps:.2f} m/s across the disk; its uncertainty adds "
+                f"±{self.wind_uncertainty_mps:.3f} m/s; Onera puts the straight-down entry "
+                f"{self.onera_shift_mps:+.3f} m/s from there)")  # fmt: skip
+
+    def summary(self, what: str = "the onset found") -> dict:
+        speed = self.speed_mps
+        return {"wind_ned_mps": list(self.wind_ned_mps) if self.wind_ned_mps else None,
+                "wind_speed_mps": speed if math.isfinite(speed) else None,
+                "wind_sd_mps": self.wind_sd_mps, "wind_source": self.wind_source,
+                "in_plane_air_mps": self.in_plane_air_mps, "wind_uncertainty_mps": self.wind_uncertainty_mps,
+                "onera_shift_mps": self.onera_shift_mps, "wind_note": self.note(what)}  # fmt: skip
+
+
+def onera_entry_n(v_H_n: float, profile: VehicleProfile, step_n: float = 0.0005) -> float:
+    """The descent ``w/v_h`` at which Onera's criterion (the profile's ``k``, ``ε_vrs``) enters the VRS with
+    in-plane air ``v_H_n``: the slowest descent with ``ε ≤ ε_vrs`` (NaN: none up to 1 v_h)."""
+    wn = np.arange(0.0, 1.0, step_n)
+    eps = aero.onera_epsilon_n(np.full_like(wn, abs(v_H_n)), -wn, profile.vrs.onera_k)
+    inside = np.flatnonzero(eps <= profile.vrs.eps_vrs)
+    return float(wn[inside[0]]) if len(inside) else math.nan
+
+
+def probe_wind(log: FlightLog, profile: VehicleProfile, ps: ProbeSamples, w0_mps: float) -> ProbeWind:
+    """The air the probe was flown in at the samples near ``w0_mps`` (all its descending samples when none)."""
+    wind = log.wind
+    near = ps.use & (np.abs(ps.w_mps - w0_mps) <= ONSET_BAND_MPS) if math.isfinite(w0_mps) else ps.use
+    if not near.any():
+        near = ps.use & (ps.w_mps > 0)
+    if not near.any():
+        near = ps.use
+    u = float(np.nanmedian(ps.u_mps[near])) if near.any() else math.nan
+    tilt = float(np.nanmedian(ps.tilt_sin[near])) if near.any() else math.nan
+    if wind is None:
+        return ProbeWind(None, None, None, u, tilt, math.nan, math.nan)
+    o = wind.over(near)
+    ned = tuple(o["wind_ned_mps"]) if o["wind_ned_mps"][0] is not None else None
+    sd = o["wind_sd_mps"]
+    sd_w = float(np.sqrt(np.nanmean((ps.tilt_sin[near] * wind.sd_mps[near]) ** 2))) if sd is not None else math.nan
+    v_h = profile.v_h_mps
+    shift = (onera_entry_n(0.0, profile) - onera_entry_n(u / v_h, profile)) * v_h if math.isfinite(u) else math.nan
+    return ProbeWind(ned, sd if sd is not None else math.nan, wind.source, u, tilt, sd_w, shift)
+
+
+def windy(pw: ProbeWind, w0_mps: float) -> list[str]:
+    """Why the probe was flown in more wind than identify can correct for (empty: it was not)."""
+    tol = MAX_RELATIVE_UNCERTAINTY * w0_mps
+    why = []
+    share = f"more than {MAX_RELATIVE_UNCERTAINTY:.0%} of the onset ({tol:.3f} m/s)"
+    if math.isfinite(pw.wind_uncertainty_mps) and pw.wind_uncertainty_mps > tol:
+        tilt_deg = math.degrees(math.asin(min(max(pw.tilt_sin, 0.0), 1.0)))
+        why.append(f"the wind's uncertainty (± {pw.wind_sd_mps:.2f} m/s, {pw.wind_source}) through a {tilt_deg:.0f}° "
+                   f"tilt makes w there uncertain by ±{pw.wind_uncertainty_mps:.3f} m/s, {share}")  # fmt: skip
+    if math.isfinite(pw.onera_shift_mps) and abs(pw.onera_shift_mps) > tol:
+        why.append(f"{pw.in_plane_air_mps:.2f} m/s of air across the disk moves Onera's VRS entry by "
+                   f"{abs(pw.onera_shift_mps):.3f} m/s from the straight-down one, {share}: the onset found is "
+                   "not the straight-down w_allow")  # fmt: skip
+    return why
+
+
 class NoOnset(FlighttestError):
     """The sweep was flown and its fluctuation stayed below ``threshold_ratio`` × hover: the onset lies above
     ``lower_bound_mps`` (the speed the sweep reached with at least ``min_samples_above`` samples). A
@@ -142,8 +260,9 @@ class NoOnset(FlighttestError):
 
     def __init__(self, message: str, *, lower_bound_mps: float, v_h_mps: float, threshold_ratio: float,
                  max_speed_mps: float, rise_ratio: float, samples: int, signals: tuple[str, ...],
-                 evidence: str) -> None:  # fmt: skip
+                 evidence: str, wind: ProbeWind | None = None) -> None:  # fmt: skip
         super().__init__(message)
+        self.wind = wind
         self.lower_bound_mps = lower_bound_mps
         self.v_h_mps = v_h_mps
         self.threshold_ratio = threshold_ratio
@@ -161,6 +280,7 @@ class NoOnset(FlighttestError):
             "threshold_ratio": self.threshold_ratio, "max_speed_mps": self.max_speed_mps,
             "rise_ratio": self.rise_ratio, "samples": self.samples, "signals": list(self.signals),
             "probe_evidence": self.evidence, "reason": str(self),
+            **(self.wind.summary("the lower bound") if self.wind is not None else {}),
         }  # fmt: skip
 
 
@@ -274,12 +394,15 @@ class Onset:
     signals: tuple[str, ...]
     bins: pd.DataFrame  # fluctuation power (data and fit) binned by speed, for plots and reports
     probe_evidence: str = ""  # check_probe's line: why this log was taken as a probe's sweep
+    wind: ProbeWind | None = None  # the air the probe was flown in (uncertainty_mps includes its share)
 
     def summary(self) -> dict:
         d = asdict(self)
         d.pop("bins")
+        d.pop("wind")
         d["signals"] = list(self.signals)
         d["onset_found"] = True
+        d.update(self.wind.summary() if self.wind is not None else {})
         return d
 
     def provenance(self, log_path: Path | str, by: str) -> str:
@@ -399,6 +522,8 @@ class ProbeSamples:
     dt_s: float
     n_win: int
     signals: tuple[str, ...]
+    u_mps: np.ndarray = field(default_factory=lambda: np.empty(0))  # air-relative in-plane speed
+    tilt_sin: np.ndarray = field(default_factory=lambda: np.empty(0))  # sin of the disk's tilt
 
 
 def probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) -> ProbeSamples:
@@ -415,7 +540,11 @@ def probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) 
         power, signals = fluctuation_power(state, hover)
     except FlighttestError as exc:
         raise FlighttestError(f"{log.name}: {exc}") from None
-    w_all = velocity_track(state, profile)["w_mps"].to_numpy(float)
+    wind = wind_mod.ensure(log, profile, drag_from_meta=False)  # w air-relative, as analyse judges it
+    track = velocity_track(state, profile, wind)
+    w_all = track["w_mps"].to_numpy(float)
+    q = state[["qw", "qx", "qy", "qz"]].to_numpy(float)
+    tilt = np.where(np.isfinite(q).all(axis=1), disk_tilt_sin(q[:, 0], q[:, 1], q[:, 2], q[:, 3]), 0.0)
     h = -state["d_m"].to_numpy(float)
     physical = np.abs(np.nan_to_num(w_all, nan=np.inf)) <= MAX_PROBE_SPEED_MPS
     use = np.isfinite(power) & physical & ~state["glitch"].to_numpy(bool) & (h > np.nanmin(h) + 0.5)
@@ -424,7 +553,8 @@ def probe_samples(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig) 
         use &= probe
     # windows average over selected samples only: the recovery's shaking must not leak back in
     y_all = _centred_mean(np.where(use, power, np.nan), n_win)
-    return ProbeSamples(t, w_all, y_all, use, hover, probe is not None, dt, n_win, tuple(signals))
+    return ProbeSamples(t, w_all, y_all, use, hover, probe is not None, dt, n_win, tuple(signals),
+                        track["u_mps"].to_numpy(float), tilt)  # fmt: skip
 
 
 def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig | None = None) -> Onset:
@@ -465,6 +595,7 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
             f"descent: no onset found (w_allow is at least that)",
             lower_bound_mps=bound, v_h_mps=profile.v_h_mps, threshold_ratio=cfg.threshold_ratio,
             max_speed_mps=w_top, rise_ratio=rise, samples=int(use.sum()), signals=ps.signals, evidence=evidence,
+            wind=probe_wind(log, profile, ps, bound),
         )  # fmt: skip
     # residual block bootstrap: the speeds flown stay as they were (the few samples past the onset
     # are the design, not something to resample away); the multiplicative scatter y/μ is resampled
@@ -495,7 +626,12 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     dw = np.abs(np.gradient(w_filled, t))[near] * 2.0 * dt
     lag_w = float(np.median(dw)) if len(dw) else 0.0
     resolution = math.sqrt(cfg.step_mps**2 / 12.0 + lag_w**2 / 3.0)
-    unc = math.sqrt(spread**2 + resolution**2)
+    pw = probe_wind(log, profile, ps, w0)
+    wind_unc = pw.wind_uncertainty_mps if math.isfinite(pw.wind_uncertainty_mps) else 0.0
+    unc = math.sqrt(spread**2 + resolution**2 + wind_unc**2)
+    if why := windy(pw, w0):
+        raise WindyProbe(f"{log.name}: probe {pw.note()}; refused: " + "; ".join(why) + " (nothing stored)",
+                         w0, unc, tuple(why), pw.summary())  # fmt: skip
     why = implausible(w0, unc, profile, float(grid[0]))
     if why:
         raise ImplausibleOnset(f"{log.name}: onset {w0:.3f} ± {unc:.3f} m/s is not a plausible VRS onset for "
@@ -518,6 +654,7 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         signals=ps.signals,
         bins=_bins(w_all[use], y, b0, b1, w0),
         probe_evidence=evidence,
+        wind=pw,
     )
 
 

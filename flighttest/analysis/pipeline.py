@@ -1,4 +1,4 @@
-"""One log in, the per-descent table out: load → heights → segment → exposure → fluctuation → context.
+"""One log in, the per-descent table out: load → heights → segment → wind → exposure → fluctuation → context.
 
 The height comes first: :func:`flighttest.analysis.heights.arbitrate` checks every height source the
 log carries against the ground and each other, and where the state's own estimator cannot be trusted
@@ -9,10 +9,18 @@ The glitch table joins the segmentation's altitude ``"jump"`` spans and the arbi
 ``"disagreement"`` spans (columns ``segment.GLITCH_COLUMNS``). :func:`prepare_state` is that first
 part on its own (heights, descents, glitches), for everything else that needs the trusted height
 (:mod:`flighttest.analysis.identify`).
+
+Then the wind: :mod:`flighttest.analysis.wind` chooses the log's (what flighttest flew with, the
+autopilot's estimate, flighttest's own estimator over the log, or calm) and puts it into the state, so
+the exposure is air-relative; each descent carries the wind it was judged with (``wind_n/e/d_mps``,
+``wind_sd_mps``, ``wind_source``), and the summary the log's (``wind_ned_mps``, ``wind_sd_mps``,
+``wind_source``, ``wind_detail``) and the exposure over all the time airborne (``airborne_exposure``:
+the guard region can be entered outside any descent, as a helix aborted 0.3 s into its descent was).
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,9 +28,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from flighttest.analysis import wind as wind_mod
 from flighttest.analysis.compare import abort_time_s
 from flighttest.analysis.descent_time import TIMED_EVENT, is_abort_phase, timed_event
-from flighttest.analysis.exposure import EXPOSURE_COLUMNS, descent_exposure, velocity_track
+from flighttest.analysis.exposure import EXPOSURE_COLUMNS, descent_exposure, exposure_over, velocity_track
 from flighttest.analysis.fluctuation import FluctuationConfig, fluctuation
 from flighttest.analysis.heights import HeightArbitration, HeightConfig, apply, arbitrate
 from flighttest.analysis.loaders import load_log
@@ -45,10 +54,26 @@ class Analysis:
     profile: VehicleProfile | None
     notes: list[str] = field(default_factory=list)
     heights: HeightArbitration | None = None  # which height the descents were timed on, and why
+    airborne: dict | None = None  # exposure over every sample airborne (EXPOSURE_COLUMNS + airborne_s)
+
+    @property
+    def wind(self) -> wind_mod.LogWind | None:
+        return self.log.wind
+
+    def wind_summary(self) -> dict:
+        """``wind_ned_mps`` (mean while airborne), ``wind_sd_mps``, ``wind_source``, ``wind_detail``."""
+        w = self.log.wind
+        if w is None:
+            return {"wind_ned_mps": None, "wind_sd_mps": None, "wind_source": None, "wind_detail": None}
+        air = wind_mod.airborne_mask(self.log.state)
+        return {**w.over(air if air.any() else None), "wind_detail": w.detail}
 
     def summary(self) -> dict:
         """What ``--json`` prints per log."""
         h = self.heights
+        descents = self.descents.drop(columns=["log", "source"], errors="ignore").to_dict("records")
+        for d in descents:  # the wind as one vector, as the log's is
+            d["wind_ned_mps"] = [d.pop(c, None) for c in DESCENT_WIND[:3]]
         return {
             "log": str(self.log.path),
             "source": self.log.source,
@@ -59,11 +84,28 @@ class Analysis:
             "attitude_source": self.log.attitude_source,
             "params": relevant(self.log.params),  # the ones that shape these tests (flighttest.analysis.params)
             "params_source": self.log.params_source,
-            "descents": self.descents.drop(columns=["log", "source"], errors="ignore").to_dict("records"),
+            **self.wind_summary(),
+            "airborne_exposure": self.airborne,
+            "descents": descents,
             "glitches": self.glitches.to_dict("records"),
             "missing": self.log.missing,
             "notes": self.notes,
         }
+
+
+# the wind each descent was judged with: its mean over the descent (and its horizontal speed), the RMS of
+# its 1 σ, its source
+DESCENT_WIND = ["wind_n_mps", "wind_e_mps", "wind_d_mps", "wind_speed_mps", "wind_sd_mps", "wind_source"]
+
+
+def descent_wind(wind: wind_mod.LogWind | None, sel: np.ndarray) -> dict:
+    """``DESCENT_WIND`` over the samples ``sel``."""
+    if wind is None or not sel.any():
+        return dict.fromkeys(DESCENT_WIND)
+    o = wind.over(sel)
+    n, e, d = o["wind_ned_mps"]
+    speed = math.hypot(n, e) if n is not None else None
+    return dict(zip(DESCENT_WIND, [n, e, d, speed, o["wind_sd_mps"], o["wind_source"]]))
 
 
 def resolve_profile(log: FlightLog, vehicle: str | None) -> tuple[VehicleProfile | None, list[str]]:
@@ -199,10 +241,19 @@ def analyse(
     profile, notes = resolve_profile(log, vehicle)
     prep = prepare_state(log, seg, h_cfg)
     descents, glitches, heights = prep.descents, prep.glitches, prep.heights
+    # the wind after the heights (its estimator needs to know when the vehicle is off the ground); the drag
+    # model a folder recorded goes first unless a profile was given explicitly
+    wind = wind_mod.apply(log, wind_mod.resolve(log, profile, drag_from_meta=not vehicle))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN windows of absent streams
         fl, baselines = fluctuation(log.state, fl_cfg)
-    track = velocity_track(log.state, profile) if profile else None
+    track = velocity_track(log.state, profile, wind) if profile else None
+    t_state = log.state["t_s"].to_numpy(float)
+    airborne = None
+    if track is not None:
+        air = wind_mod.airborne_mask(log.state)
+        airborne = {"airborne_s": float(np.sum(np.diff(t_state, append=t_state[-1])[air])),
+                    **exposure_over(track, air)}  # fmt: skip
     exp_rows = []
     for row in descents.itertuples():
         exp = (
@@ -215,14 +266,16 @@ def analyse(
             warnings.simplefilter("ignore", RuntimeWarning)
             exp["fluct_index_max"] = float(np.nanmax(fl.loc[sel, "fluct_index"])) if sel.any() else np.nan
             exp["rate_rms_max_radps"] = float(np.nanmax(fl.loc[sel, "rate_rms_radps"])) if sel.any() else np.nan
+        exp.update(descent_wind(wind, (t_state >= row.start_s) & (t_state <= row.end_s)))
         exp_rows.append(exp)
-    extra = pd.DataFrame(exp_rows, columns=[*EXPOSURE_COLUMNS, "fluct_index_max", "rate_rms_max_radps"])
+    extra = pd.DataFrame(exp_rows, columns=[*EXPOSURE_COLUMNS, "fluct_index_max", "rate_rms_max_radps", *DESCENT_WIND])
     descents = pd.concat([descents.reset_index(drop=True), extra], axis=1)
     descents = _context(log, descents)
     descents.insert(0, "source", log.source)
     descents.insert(0, "log", display_path(log.path))  # the table's text must be UTF-8 whatever the name
     notes.extend(prep.notes)
-    return Analysis(log, descents, glitches, track, fl, baselines, profile, notes + log.notes, heights)
+    notes.extend(wind.notes)
+    return Analysis(log, descents, glitches, track, fl, baselines, profile, notes + log.notes, heights, airborne)
 
 
 def _merge_glitches(jumps: pd.DataFrame, disagreements: pd.DataFrame) -> pd.DataFrame:

@@ -5,7 +5,8 @@ Per log: which height the descents were timed on (the arbitration's verdict on e
 height source said; altitude and descent rate over time (descents shaded, glitch spans marked with
 their kind, the estimator's own height drawn beside the trusted one where they differ), the path in
 plan view and 3D, the velocity-space chart (paper Fig. 5/8: VRS/TWS/WBS regions, the cone, the guard
-boundary) with the flight's normalised blade-frame track, and the probe plot: the sweep alone, its
+boundary) with the flight's normalised air-relative blade-frame track (the wind it was judged with in its
+title and in the log's bullets: :mod:`flighttest.analysis.wind`), and the probe plot: the sweep alone, its
 RMS fluctuation × hover binned over descent speed, with the hover level, the detector's threshold
 and the identified onset with its band (:func:`draw_fluctuation`).
 """
@@ -37,8 +38,10 @@ TABLE_COLUMNS = {
     "max_rate_mps": "max m/s",
     "horizontal_excursion_m": "horiz. m",
     "time_inside_s": "inside s",
+    "time_inside_worst_s": "inside, worst air s",
     "time_near_s": "near s",
     "min_margin_mps": "min margin m/s",
+    "wind_speed_mps": "wind m/s",
     "fluct_index_max": "fluct. max",
     "phase": "phase",
 }
@@ -147,7 +150,8 @@ def plot_velocity_space(a: Analysis, out: Path) -> Path:
     for row in a.descents.itertuples():
         sel = (t >= row.start_s) & (t <= row.end_s)
         ax.plot(tr["v_H_n"][sel], tr["v_z_n"][sel], ".", ms=2.5, label=f"descent {row.descent}")
-    ax.set_title(f"{a.log.name}: blade-frame track, v_h = {a.profile.v_h_mps:.2f} m/s ({a.profile.name})")
+    ax.set_title(f"{a.log.name}: blade-frame track, air-relative, v_h = {a.profile.v_h_mps:.2f} m/s ({a.profile.name})"
+                 + (f"\nwind {a.log.wind.describe()}" if a.log.wind is not None else ""), fontsize=9)  # fmt: skip
     ax.legend(loc="lower left", fontsize=7, framealpha=0.9)
     fig.tight_layout()
     fig.savefig(out)
@@ -407,6 +411,29 @@ def source_lines(a: Analysis) -> list[str]:
     return [f"- height source: {height}", f"- attitude source: {att}"]
 
 
+def wind_lines(a: Analysis) -> list[str]:
+    """Markdown bullets: the wind the exposure was judged with (flighttest.analysis.wind), and the exposure
+    over all the time airborne."""
+    from flighttest.flying.wind import WIND_COVERAGE_SIGMAS
+
+    w = a.log.wind
+    if w is None:
+        return []
+    air = a.wind_summary()
+    sd = air["wind_sd_mps"]
+    speed = "unknown" if air["wind_ned_mps"][0] is None else f"{math.hypot(*air['wind_ned_mps'][:2]):.2f} m/s"
+    vec = "" if air["wind_ned_mps"][0] is None else " (N {:+.2f}, E {:+.2f}, D {:+.2f})".format(*air["wind_ned_mps"])
+    md = [f"- wind: **{speed}**{vec}" + (f" ± {sd:.2f} m/s (1 σ)" if sd is not None else ", uncertainty unknown")
+          + f", `{w.source}`: {w.detail}; exposure and the velocity space are air-relative, the worst air "
+          f"within {WIND_COVERAGE_SIGMAS:g} σ of it beside"]  # fmt: skip
+    e = a.airborne
+    if e and math.isfinite(e.get("time_inside_s", math.nan)):
+        md.append(f"- airborne {e['airborne_s']:.1f} s: inside the guard region {_fmt(e['time_inside_s'])} s "
+                  f"({_fmt(e['time_inside_worst_s'])} s at the worst air), min margin {_fmt(e['min_margin_mps'])} m/s "
+                  f"({_fmt(e['min_margin_worst_mps'])} at the worst air)")  # fmt: skip
+    return md
+
+
 def heights_section(a: Analysis) -> list[str]:
     """Markdown lines: every height source with the arbitration's verdict, then the glitch spans with
     what each source said (referred to home) at the worst instant."""
@@ -457,6 +484,7 @@ def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = 
                 f"w_allow {a.profile.w_allow_mps:.2f} m/s: {a.profile.w_allow_source})"
             )
         md += source_lines(a)
+        md += wind_lines(a)
         for k, v in a.log.missing.items():
             md.append(f"- missing {k}: {v}")
         md += [f"- note: {n}" for n in a.notes]

@@ -25,7 +25,11 @@ State columns (``STATE_COLUMNS``), all SI, NED/FRD as in CONVENTIONS §1:
 ``landed``         the autopilot's land detector: 1 on the ground, 0 in the air (taking off and
                    landing count as in the air), NaN unknown (most logs before ArduCopter 4 and PX4
                    1.x tlogs without ``EXTENDED_SYS_STATE``)
-``wn_mps we_mps wd_mps``  wind NED (velocity of the air), m/s; NaN where the log has no estimate
+``wn_mps we_mps wd_mps``  wind NED (velocity of the air), m/s: the autopilot's own estimate
+                   (``FlightLog.wind_reported``), NaN where the log has none — a report of exact
+                   zeros is what an estimator that does not estimate the wind sends, not a calm. The
+                   wind the analysis judges the air with, whatever its source, is ``FlightLog.wind``
+                   (:mod:`flighttest.analysis.wind`)
 ``boot_s``         the autopilot's own clock (s since its boot) at the sample; NaN when unknown. It is
                    the clock PX4's ``.ulg``, ArduPilot's ``.bin`` and the MAVLink ``time_boot_ms``
                    fields share, so logs of one flight written by different programs line up on it
@@ -89,7 +93,7 @@ CONSEQUENCE = {
     "imu": "vertical acceleration from differentiated velocity",
     "motors": "no motor-output spread (ΔT/T proxy)",
     "mode": "flight mode and armed state unknown",
-    "wind": "wind unknown: exposure computed with zero wind",
+    "wind": "the autopilot reports no wind estimate (the analysis takes flighttest's: flighttest.analysis.wind)",
 }
 
 
@@ -146,6 +150,56 @@ def height_source(
     return HeightSource(name=name, kind=kind, t_s=t[order], alt_m=a[order], home_relative=home_relative)
 
 
+@dataclass(frozen=True)
+class WindReport:
+    """The autopilot's own wind estimate as the log has it, at its own rate on the state clock.
+
+    ``ned_mps`` is the velocity of the air (n, 3); a sample of exact zeros is NaN (an estimator that
+    does not estimate the wind sends zeros: not a calm), ``zero_samples`` counts them. ``sd_mps`` is
+    the report's own horizontal 1 σ where it gives one (``WIND_COV.horiz_accuracy``, the ``wind``
+    topic's variances), else NaN."""
+
+    name: str  # the log's own name: "WIND_COV", "WIND", "XKF2", "wind", "estimator_wind", "wind_estimate"
+    t_s: np.ndarray
+    ned_mps: np.ndarray
+    sd_mps: np.ndarray
+    zero_samples: int = 0
+
+    @property
+    def estimating(self) -> bool:
+        """Whether any sample is an estimate (not exact zeros, finite)."""
+        return bool(np.isfinite(self.ned_mps).all(axis=1).any())
+
+
+def wind_report(name: str, t_s: np.ndarray, ned_mps: np.ndarray, sd_mps: np.ndarray | None,
+                origin_s: float) -> WindReport | None:  # fmt: skip
+    """A :class:`WindReport` from a stream on the source's clock (``origin_s`` = the state's t_s = 0):
+    time-sorted, samples without a finite time dropped, exact-zero samples NaN; None when empty."""
+    t = np.asarray(t_s, float) - origin_s
+    w = np.asarray(ned_mps, float).reshape(len(t), 3)
+    sd = np.full(len(t), np.nan) if sd_mps is None else np.asarray(sd_mps, float).copy()
+    keep = np.isfinite(t)
+    if not keep.any():
+        return None
+    t, w, sd = t[keep], w[keep].copy(), sd[keep]
+    order = np.argsort(t, kind="stable")
+    t, w, sd = t[order], w[order], sd[order]
+    zero = (w == 0.0).all(axis=1)
+    w[zero | ~np.isfinite(w).all(axis=1)] = np.nan
+    sd[~(np.isfinite(sd) & (sd > 0))] = np.nan
+    return WindReport(name=name, t_s=t, ned_mps=w, sd_mps=sd, zero_samples=int(zero.sum()))
+
+
+def state_wind(report: WindReport | None, t_state: np.ndarray, max_gap_s: float) -> dict[str, np.ndarray]:
+    """The state's wind columns from the autopilot's report: its estimates (not its exact zeros)
+    interpolated onto the state instants, NaN across gaps longer than ``max_gap_s``; {} for none."""
+    if report is None or not report.estimating:
+        return {}
+    ok = np.isfinite(report.ned_mps).all(axis=1)
+    wi = resample(report.t_s[ok], report.ned_mps[ok], t_state, max_gap_s)
+    return {"wn_mps": wi[:, 0], "we_mps": wi[:, 1], "wd_mps": wi[:, 2]}
+
+
 def param_value(v: float | int) -> float:
     """A parameter as the autopilot meant it: the shortest decimal that round-trips its float32
     (0.95, not 0.949999988), so one value logged by ULog, DataFlash and MAVLink compares equal.
@@ -180,6 +234,12 @@ class FlightLog:
     # autopilot parameters as the log has them (name → value), and where they came from
     params: dict[str, float] = field(default_factory=dict)
     params_source: str | None = None
+    # the autopilot's own wind estimate as logged (WIND_COV, WIND, XKF2, wind topics), None when none
+    wind_reported: WindReport | None = None
+    # where the specific-force columns (ax/ay/az) came from, e.g. "HIGHRES_IMU", "IMU", "sensor_combined"
+    accel_source: str | None = None
+    # the wind the analysis judges the air with (flighttest.analysis.wind.LogWind), once resolved
+    wind: Any = None
 
     @property
     def name(self) -> str:

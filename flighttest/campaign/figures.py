@@ -1,7 +1,8 @@
 """The campaign's two comparison figures: vertical baseline against helix descent.
 
-``plot_tracks_velocity_space`` overlays the blade-frame tracks of both main descents on the paper's
-normalised velocity-space chart (where each flight went relative to VRS and the guard boundary);
+``plot_tracks_velocity_space`` overlays the air-relative blade-frame tracks of both main descents on the
+paper's normalised velocity-space chart (where each flight went relative to VRS and the guard boundary; the
+wind each was judged with in its legend: :mod:`flighttest.analysis.wind`);
 ``plot_descent_comparison`` sets the two descents side by side in time (altitude over time, and the
 descent times as bars with the speed-up). Both go in the README and the campaign report.
 """
@@ -120,13 +121,28 @@ def plot_tracks_velocity_space(vertical: Analysis, helix: Analysis, out: Path, p
         if np.isfinite(v_z).any():  # the deepest point: where the descent came closest to (or went into) VRS
             k = int(np.nanargmin(v_z))
             ax.plot([v_H[k]], [v_z[k]], "v", ms=9, color=colour, mec="white", mew=0.8)
+    winds = "; ".join(f"{label.split()[0]}{flights_wind(a, descents[role])}" for role, a, label, _ in flights)
     ax.set_title(
-        f"{profile.name}: main descents in velocity space\n"
+        f"{profile.name}: main descents in velocity space, air-relative\n"
         f"v_h = {profile.v_h_mps:.2f} m/s, w_allow = {profile.w_allow_mps:.2f} m/s"
-        f" ({profile.w_allow_mps / profile.v_h_mps:.3f} v_h)"
+        f" ({profile.w_allow_mps / profile.v_h_mps:.3f} v_h)\n{winds}",
+        fontsize=9,
     )
     ax.legend(loc="lower left", fontsize=8, framealpha=0.9)
     return _save(fig, out)
+
+
+def flights_wind(a: Analysis, d: pd.Series) -> str:
+    """" wind 3.0 ± 0.2 m/s (source)": the wind over the descent ``d`` its track was judged with."""
+    w = a.log.wind
+    if w is None:
+        return " wind not resolved"
+    sel = _in_window(a.log.state["t_s"], d)
+    o = w.over(sel if sel.any() else None)
+    if o["wind_ned_mps"][0] is None:
+        return f" wind unknown ({w.source})"
+    sd = f" ± {o['wind_sd_mps']:.1f}" if o["wind_sd_mps"] is not None else ""
+    return f" wind {np.hypot(*o['wind_ned_mps'][:2]):.1f}{sd} m/s ({w.source})"
 
 
 def descent_profile(a: Analysis, d: pd.Series, context_s: float = CONTEXT_S) -> tuple[np.ndarray, np.ndarray]:

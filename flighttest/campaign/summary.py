@@ -39,6 +39,10 @@ ROWS = (  # the summary table, one column per descent: label, key, format
     ("inside the guard region s", "time_inside_s", "{:.2f}"),
     ("near its boundary s", "time_near_s", "{:.2f}"),
     ("min margin to it m/s", "min_margin_mps", "{:.3f}"),
+    ("inside at the worst air within the wind's uncertainty s", "time_inside_worst_s", "{:.2f}"),
+    ("wind m/s (over the descent)", "wind_speed_mps", "{:.2f}"),
+    ("wind 1 σ m/s", "wind_sd_mps", "{:.2f}"),
+    ("wind from", "wind_source", "{}"),
     ("guard aborts", "guard_aborts", "{}"),
 )
 
@@ -149,7 +153,10 @@ def summary_markdown(summary: dict) -> str:
         "horizontal error at that instant is in the table). The figures show that span. Log segment: the main",
         "descent found in each flight's log (`flighttest compare`), never one the abort ladder flew (PX4's Land",
         "after an abort). Inside/near: time with the blade-frame velocity inside /",
-        "within the margin of the guard region; guard aborts: the live guard's abort orders (`guard.csv`).",
+        "within the margin of the guard region, air-relative with the wind in the table (what flighttest flew",
+        "with, else the autopilot's estimate, else flighttest's estimate from the IMU's drag:",
+        "`flighttest.analysis.wind`), and at the worst air within 2.45 σ of it as the live guard judges; guard",
+        "aborts: the live guard's abort orders (`guard.csv`).",
         "Every flight in detail, the probe's fluctuation plot with the onset: [report.md](report.md).",
         "",
         "![velocity space](velocity_space.png)",

@@ -18,6 +18,7 @@ from rich.text import Text
 from flighttest.analysis.compare import add_param_differences, add_speedup, compare_row
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
+from flighttest.flying.wind import WIND_COVERAGE_SIGMAS
 from flighttest.inputs import FINITE, Range, atomic_write, check_output_path, check_path_text
 
 JOBS = Range(1, 256, integer=True)  # worker processes (flighttest.analysis.batch.MAX_JOBS)
@@ -48,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="descents, timing, VRS exposure and fluctuation of flight logs",
         description="Analyse flighttest log folders, MAVLink .tlog, ArduPilot .bin and PX4 .ulg files (told by "
         "their content, whatever their name). "
+        "VRS exposure is air-relative: with the wind flighttest flew with (a folder's guard.csv), else the "
+        "autopilot's estimate in the log, else flighttest's own estimate from the log's IMU, attitude and "
+        "velocity with the vehicle's drag model; each log names its wind_source. "
         "A folder that is not itself a flight log is walked for logs of every format, analysed on every "
         "core, and its per-descent table written as Parquet.",
     )
@@ -89,7 +93,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "identify",
         help="VRS onset from a probe flight; optionally store it as the profile's w_allow",
         description="Find the descent speed (blade-frame, air-relative) at which fluctuation first rises "
-        "above the flight's hover baseline, with its uncertainty, normalised by v_h.",
+        "above the flight's hover baseline, with its uncertainty, normalised by v_h. The air is the log's wind "
+        "(what flighttest flew with, the autopilot's estimate, or flighttest's own from the IMU's drag), named in "
+        "the result; a probe flown in more wind than that correction can vouch for is refused.",
     )
     pi.add_argument("log", metavar="LOG")  # text: Path("") would be the current folder
     pi.add_argument("--vehicle", required=True, metavar="NAME", help="vehicle profile name or .toml path")
@@ -394,12 +400,39 @@ def _glitch_line(g: dict) -> str:
     return f"  estimator glitch{what} {when}: altitude jumped {_num(g.get('max_jump_m'), '{:.1f}')} m (not a descent)"
 
 
+def wind_line(s: dict) -> str | None:
+    """The wind the log was judged with, in words (keys of ``Analysis.summary``), None without one."""
+    if not s.get("wind_source"):
+        return None
+    w, sd = s.get("wind_ned_mps"), s.get("wind_sd_mps")
+    if not w or w[0] is None:
+        return f"  wind: unknown ({s['wind_source']})"
+    spread = f" ± {sd:.2f}" if isinstance(sd, int | float) else " (uncertainty unknown)"
+    return (f"  wind: {math.hypot(w[0], w[1]):.2f} m/s{spread} (N {w[0]:+.2f}, E {w[1]:+.2f}, D {w[2]:+.2f}) "
+            f"from {s['wind_source']}: exposure is air-relative")  # fmt: skip
+
+
+def airborne_line(s: dict) -> str | None:
+    """The exposure over all the time airborne (the guard region is entered outside descents too)."""
+    e = s.get("airborne_exposure")
+    if not e or not isinstance(e.get("time_inside_s"), int | float) or not math.isfinite(e["time_inside_s"]):
+        return None
+    worst = e.get("time_inside_worst_s")
+    at_worst = (f" ({_num(worst)} s at the worst air within {WIND_COVERAGE_SIGMAS:g} σ of the wind)"
+                if isinstance(worst, int | float) and math.isfinite(worst) else "")  # fmt: skip
+    return (f"  airborne {_num(e.get('airborne_s'), '{:.1f}')} s: inside the guard region {_num(e['time_inside_s'])} s"
+            f"{at_worst}, min margin {_num(e.get('min_margin_mps'))} m/s")  # fmt: skip
+
+
 def _print_sources(s: dict) -> None:
-    """Where the log's height, attitude and parameters came from (keys the summary may carry)."""
+    """Where the log's height, attitude, wind and parameters came from (keys the summary may carry)."""
     if s.get("height_source"):
         console.print(f"  height from: {s['height_source']}")
     if "attitude_source" in s:
         console.print(f"  attitude from: {s['attitude_source'] or 'none in the log'}")
+    for line in (wind_line(s), airborne_line(s)):
+        if line:
+            console.print(line, markup=False)
     if "params" in s:
         params = s.get("params") or {}
         src = f" (from {s['params_source']})" if s.get("params_source") else ""
@@ -420,8 +453,10 @@ COMPARE_COLUMNS = {  # header: (key, format)
     "mean m/s": ("mean_rate_mps", "{:.2f}"),
     "max m/s": ("max_rate_mps", "{:.2f}"),
     "inside s": ("time_inside_s", "{:.2f}"),
+    "inside worst s": ("time_inside_worst_s", "{:.2f}"),
     "near s": ("time_near_s", "{:.2f}"),
     "min margin m/s": ("min_margin_mps", "{:.2f}"),
+    "wind m/s": ("wind_speed_mps", "{:.2f}"),
     "fluct. max": ("fluct_index_max", "{:.1f}"),
 }
 
@@ -509,7 +544,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
             "duration: the main descent found in the log (never one the abort ladder flew); descent: flighttest's "
             "own logs, from the first setpoint of the descent until at its end height with the vertical speed "
             "settled, horiz. err: off the end point sideways then; speed-up × = the first log's "
-            f"{'descent time' if basis == 'descent_time_s' else 'duration'} / this one's"
+            f"{'descent time' if basis == 'descent_time_s' else 'duration'} / this one's; inside: at the wind's "
+            f"estimate, inside worst: at the worst air within {WIND_COVERAGE_SIGMAS:g} σ of it (wind: its speed "
+            "over the descent; --json: its vector, 1 σ and source)"
         )
     return 2 if errors else 0
 
@@ -608,6 +645,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
             return 0
         console.print(line)
         console.print(f"[dim]{none} — {none.samples} samples; {none.evidence}[/]")
+        if none.wind is not None:
+            console.print(f"the sweep was {none.wind.note('the lower bound')}", markup=False)
         if args.write_profile:
             console.print("nothing stored: there is no onset to store (the profile keeps its prior)")
         return 0
@@ -632,6 +671,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f"{onset.samples} descending samples up to {onset.max_speed_mps:.2f} m/s)"
     )
     console.print(f"[dim]{onset.probe_evidence}[/]")
+    if onset.wind is not None:
+        console.print(f"the probe was {onset.wind.note()}", markup=False)
     console.print(f"profile w_allow now: {profile.w_allow_mps:.3f} m/s ({profile.w_allow_source})")
     if out["profile_written"]:
         console.print(f"stored w_allow = {onset.w_onset_mps:.3f} m/s in {out['profile_written']}")

@@ -14,7 +14,9 @@ centidegree attitudes arrive in degrees and ``Lat``/``Lng`` in degrees. What is 
 - motors: ``RCOU`` ``C1..C8`` PWM µs → (µs − 1000)/1000; channels never non-zero dropped.
 - mode: ``MODE.ModeNum`` → ArduCopter mode name; armed: ``ARM.ArmState``, else ``EV`` ids 10/11;
   landed: ``EV`` ids 18 (``LAND_COMPLETE``) → 1 and 28 (``NOT_LANDED``) → 0, the land detector's changes.
-- wind: ``XKF2`` ``VWN VWE`` (m/s, velocity of the air) when present.
+- wind: ``XKF2`` ``VWN VWE`` (m/s, velocity of the air; no accuracy) as ``FlightLog.wind_reported``; the
+  state's wind columns only where it is an estimate: EKF3 logs exact zeros when it does not estimate
+  the wind (``EK3_DRAG_BCOEF_X/Y`` and ``EK3_DRAG_MCOEF`` 0, the default on a multicopter).
 - heights (up-positive m; the position's own first): ``XKF1.PD`` / ``NKF1.PD`` (negated, EKF origin,
   home-relative), ``POS.RelHomeAlt`` (home-relative) and ``POS.Alt`` (AMSL), ``CTUN.Alt`` (the
   altitude controller's, home-relative), ``BARO.Alt`` (first barometer, m above its ground
@@ -36,6 +38,7 @@ import os
 import sys
 import tempfile
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +54,8 @@ from flighttest.analysis.schema import (
     normalise_quaternions,
     param_value,
     resample,
+    state_wind,
+    wind_report,
 )
 from flighttest.errors import FlighttestError
 from flighttest.model.frames import EARTH_RADIUS_M, quat_from_euler
@@ -308,12 +313,15 @@ def load_dataflash(path: Path) -> FlightLog:
         if sel.any():
             landed = (ev["Id"][sel] == EV_LAND_COMPLETE).astype(float)
             cols["landed"] = resample(ev["TimeUS"][sel] / 1e6, landed, t, 1e9, hold=True)
+    reported = None
     if (k2 := msgs.get("XKF2")) is not None:
         w = np.column_stack([k2["VWN"], k2["VWE"], np.zeros(len(k2["VWN"]))])
-        wi = resample(k2["TimeUS"] / 1e6, w, t, 5.0)
-        cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
+        reported = wind_report("XKF2", k2["TimeUS"] / 1e6, w, None, 0.0)
+        cols.update(state_wind(reported, t, 5.0))
     missing: dict[str, str] = {}
     state = fill_derived(build_state(t, None, cols), missing)
+    if reported is not None:
+        reported = replace(reported, t_s=reported.t_s - state.attrs["t_origin_s"])
     return FlightLog(
         path=Path(path),
         source="dataflash",
@@ -324,4 +332,6 @@ def load_dataflash(path: Path) -> FlightLog:
         attitude_source=None if attitude is None else attitude[0],
         params=params,
         params_source="dataflash PARM" if params else None,
+        wind_reported=reported,
+        accel_source="IMU" if "IMU" in msgs else None,
     )

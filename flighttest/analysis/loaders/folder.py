@@ -14,7 +14,9 @@ read as missing (rows without a usable time dropped, so ``t_s`` is always a fini
 (``t_s``, ``descent_time_s``, ``horizontal_error_m``, ...) holding anything but a finite number —
 ``true``, a string, ``Infinity`` — or a negative duration or distance is dropped from its event.
 
-Height sources and the attitude source are the tlog's. Parameters, the first that has any:
+Height sources, the attitude source and the autopilot's wind report are the tlog's; the wind flighttest
+flew with is ``guard.csv``'s (``wn/we/wd_mps``, ``wind_sd_mps``, ``wind_source``:
+:mod:`flighttest.analysis.wind` takes it). Parameters, the first that has any:
 ``params.json`` (``{"params": {name: value}, ...}``, the snapshot read at preflight), the
 ``"params"`` of ``preflight.json`` (the few the preflight checks read), the tlog's ``PARAM_VALUE``.
 """
@@ -268,4 +270,6 @@ def load_folder(path: Path) -> FlightLog:
         attitude_source=log.attitude_source,
         params=params,
         params_source=params_source,
+        wind_reported=log.wind_reported,
+        accel_source=log.accel_source,
     )

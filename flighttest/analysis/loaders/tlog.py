@@ -8,15 +8,20 @@ Streams used, in order of preference (all MAVLink common, so PX4 and ArduPilot a
   ``relative_alt`` mm up-positive → ``d_m = −relative_alt/1000``, ``vx vy vz`` cm/s NED → m/s).
 - attitude and body rates: ``ATTITUDE_QUATERNION`` (q1..q4 = w,x,y,z), else ``ODOMETRY``, else
   ``ATTITUDE`` (Euler rad → quaternion); rates rad/s FRD.
-- specific force: ``HIGHRES_IMU`` (m/s²), else ``SCALED_IMU`` (milli-g → m/s²).
+- specific force: ``HIGHRES_IMU`` (m/s²), else ``SCALED_IMU`` (milli-g → m/s²), else ArduPilot's
+  ``RAW_IMU`` (ArduPilot sends it in milli-g, as SCALED_IMU; other autopilots' raw units are their
+  sensor's, so it is used only when the HEARTBEAT says ArduPilot). ``FlightLog.accel_source`` names it.
 - motors: ``ACTUATOR_OUTPUT_STATUS`` (PX4; PWM µs when > 100, else taken as 0..1), else
   ``SERVO_OUTPUT_RAW`` (µs). Channels that are never non-zero are dropped.
 - mode/armed: ``HEARTBEAT`` from the vehicle (not from a GCS), decoded by pymavlink's
   ``mode_string_v10``; armed = ``base_mode & MAV_MODE_FLAG_SAFETY_ARMED``.
 - landed: ``EXTENDED_SYS_STATE.landed_state`` (``MAV_LANDED_STATE``: 1 on the ground → 1; 2–4 in the
   air, taking off, landing → 0; 0 undefined → NaN).
-- wind: ``WIND_COV`` (NED m/s), else ArduPilot's ``WIND`` (direction the wind comes *from*, deg,
-  speed m/s → air velocity ``−speed·(cos, sin)``; its ``speed_z`` sign is undocumented, so wd = 0).
+- wind: ``WIND_COV`` (NED m/s; 1 σ from ``horiz_accuracy``, else ``√var_horiz``), else ArduPilot's
+  ``WIND`` (direction the wind comes *from*, deg, speed m/s → air velocity ``−speed·(cos, sin)``; its
+  ``speed_z`` sign is undocumented, so wd = 0; no accuracy). Kept as ``FlightLog.wind_reported``; the
+  state's wind columns hold its estimates only: reports of exact zeros (what PX4's EKF2 and
+  ArduPilot's EKF3 send when they do not estimate the wind, their default on a multicopter) are NaN.
 
 Height sources (``FlightLog.heights``, each at its own rate; up-positive metres):
 
@@ -51,6 +56,7 @@ clock is the state's ``boot_s``; every other stream, at its own rate, is interpo
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -62,6 +68,7 @@ from flighttest.analysis.schema import (
     G_MPS2,
     FlightLog,
     HeightSource,
+    WindReport,
     build_state,
     continuous_quaternions,
     fill_derived,
@@ -70,7 +77,9 @@ from flighttest.analysis.schema import (
     param_value,
     pressure_altitude_m,
     resample,
+    state_wind,
     stream_rate_hz,
+    wind_report,
 )
 from flighttest.errors import FlighttestError
 from flighttest.model.frames import EARTH_RADIUS_M, body_to_ned, quat_from_euler
@@ -122,6 +131,7 @@ STREAMS = (
     "ATTITUDE",
     "HIGHRES_IMU",
     "SCALED_IMU",
+    "RAW_IMU",
     "ACTUATOR_OUTPUT_STATUS",
     "SERVO_OUTPUT_RAW",
     "HEARTBEAT",
@@ -286,16 +296,21 @@ def load_tlog(path: Path) -> FlightLog:
         ri = resample(att_t, rates, t, MAX_GAP_S)
         cols.update(p_radps=ri[:, 0], q_radps=ri[:, 1], r_radps=ri[:, 2])
 
-    if (imu := dec["HIGHRES_IMU"]) is not None:
-        f = imu.fields
-        acc = np.column_stack([f["xacc"], f["yacc"], f["zacc"]]).astype(float)
-        ai = resample(when(imu), acc, t, MAX_GAP_S)
-    elif (imu := dec["SCALED_IMU"]) is not None:
-        f = imu.fields
-        acc = np.column_stack([f["xacc"], f["yacc"], f["zacc"]]).astype(float) * G_MPS2 * 1e-3
-        ai = resample(when(imu), acc, t, MAX_GAP_S)
-    else:
-        ai = None
+    hb = dec["HEARTBEAT"]
+    vehicle_hb = hb.fields[hb.fields["type"] != MAV_TYPE_GCS] if hb is not None else None
+    autopilot = None
+    if vehicle_hb is not None and len(vehicle_hb):
+        autopilot = int(np.bincount(vehicle_hb["autopilot"]).argmax())
+    ai, accel_source = None, None
+    imu = None
+    for name, scale in (("HIGHRES_IMU", 1.0), ("SCALED_IMU", G_MPS2 * 1e-3), ("RAW_IMU", G_MPS2 * 1e-3)):
+        if name == "RAW_IMU" and autopilot != dialect.MAV_AUTOPILOT_ARDUPILOTMEGA:
+            continue  # raw sensor units elsewhere
+        if (imu := dec[name]) is not None:
+            f = imu.fields
+            acc = np.column_stack([f["xacc"], f["yacc"], f["zacc"]]).astype(float) * scale
+            ai, accel_source = resample(when(imu), acc, t, MAX_GAP_S), name
+            break
     imu_fast = imu is None or stream_rate_hz(when(imu)) >= 0.5 * stream_rate_hz(t)
     if ai is not None:
         cols.update(ax_mps2=ai[:, 0], ay_mps2=ai[:, 1], az_mps2=ai[:, 2])
@@ -315,13 +330,11 @@ def load_tlog(path: Path) -> FlightLog:
         for k in range(mi.shape[1]):
             cols[f"motor_{k}"] = mi[:, k]
 
-    autopilot = None
-    if (hb := dec["HEARTBEAT"]) is not None:
+    if hb is not None:
         f = hb.fields
         keep = f["type"] != MAV_TYPE_GCS
         if keep.any():
             f, hb_t = f[keep], hb.recv_us[keep] / 1e6
-            autopilot = int(np.bincount(f["autopilot"]).argmax())
             keys = np.stack([f["autopilot"], f["type"], f["base_mode"], f["custom_mode"]], axis=1).astype(np.int64)
             uniq, inv = np.unique(keys, axis=0, return_inverse=True)
             names = np.array(
@@ -348,20 +361,27 @@ def load_tlog(path: Path) -> FlightLog:
         landed = np.where(ls == MAV_LANDED_STATE_ON_GROUND, 1.0, np.where(ls > 0, 0.0, np.nan))
         cols["landed"] = resample(when(es), landed, t, 5.0, hold=True)
 
+    reported: WindReport | None = None
     if (wc := dec["WIND_COV"]) is not None:
         f = wc.fields
-        wi = resample(when(wc), np.column_stack([f["wind_x"], f["wind_y"], f["wind_z"]]), t, 5.0)
-        cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
+        acc = f["horiz_accuracy"].astype(float)
+        var = f["var_horiz"].astype(float)
+        sd = np.where(np.isfinite(acc) & (acc > 0), acc, np.sqrt(np.where(var > 0, var, np.nan)))
+        w = np.column_stack([f["wind_x"], f["wind_y"], f["wind_z"]])
+        reported = wind_report("WIND_COV", when(wc), w, sd, 0.0)
     elif (wd := dec["WIND"]) is not None:
         f = wd.fields
         ang = np.radians(f["direction"].astype(float))
         w = np.column_stack([-f["speed"] * np.cos(ang), -f["speed"] * np.sin(ang), np.zeros(len(f))])
-        wi = resample(wd.recv_us / 1e6, w, t, 5.0)
-        cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
+        reported = wind_report("WIND", wd.recv_us / 1e6, w, None, 0.0)
+    cols.update(state_wind(reported, t, 5.0))
 
     missing: dict[str, str] = {}
     state = fill_derived(build_state(t, t, cols), missing, imu_fast)
     params = _params(dec["PARAM_VALUE"], bytewise=autopilot == dialect.MAV_AUTOPILOT_PX4)
+    origin = state.attrs["t_origin_s"]
+    if reported is not None:
+        reported = replace(reported, t_s=reported.t_s - origin)
     return FlightLog(
         path=Path(path),
         source="tlog",
@@ -372,4 +392,6 @@ def load_tlog(path: Path) -> FlightLog:
         attitude_source=attitude_source,
         params=params,
         params_source="tlog PARAM_VALUE" if params else None,
+        wind_reported=reported,
+        accel_source=accel_source,
     )

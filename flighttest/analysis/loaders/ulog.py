@@ -5,11 +5,17 @@ PX4 topics used (each at its own rate, µs since boot):
 - ``vehicle_local_position``: ``x y z`` (m NED), ``vx vy vz`` (m/s NED) → the sample instants;
 - ``vehicle_attitude``: ``q[0..3]`` = w, x, y, z (body FRD → NED);
 - ``vehicle_angular_velocity``: ``xyz[0..2]`` rad/s FRD (else ``sensor_combined.gyro_rad``);
-- ``sensor_combined``: ``accelerometer_m_s2[0..2]`` (specific force FRD);
+- ``sensor_combined``: ``accelerometer_m_s2[0..2]`` (specific force FRD: what the accelerometer measures,
+  ≈ (0, 0, −g) level at rest; calibrated, not bias-corrected by the estimator. ``vehicle_acceleration``
+  is the same specific force with EKF2's bias removed and filtered, but PX4 logs it at ~20 Hz, too
+  slow for the fluctuation measures);
 - ``actuator_motors``: ``control[i]`` (0..1), else ``actuator_outputs``: ``output[i]`` (PWM µs);
 - ``vehicle_status``: ``nav_state`` (PX4 navigation state → name), ``arming_state`` (2 = armed);
 - ``vehicle_land_detected``: ``landed`` (the state's ``landed``);
-- ``wind`` / ``wind_estimate``: ``windspeed_north/east`` (m/s; vertical wind 0);
+- ``wind`` (PX4 1.13 on), else ``estimator_wind`` (instance 0), else ``wind_estimate`` (older):
+  ``windspeed_north/east`` (m/s; vertical wind 0; 1 σ from ``variance_north/east``) as
+  ``FlightLog.wind_reported``, in the state's wind columns only where it is an estimate (EKF2 without
+  drag fusion or airspeed, the multicopter default, publishes none, or zeros);
 - ``vehicle_local_position_setpoint`` / ``trajectory_setpoint``: the setpoints table.
 
 Height sources (up-positive m): ``vehicle_local_position.z`` (negated; the EKF origin, home-relative)
@@ -31,6 +37,7 @@ import contextlib
 import io
 import os
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +54,8 @@ from flighttest.analysis.schema import (
     param_value,
     pressure_altitude_m,
     resample,
+    state_wind,
+    wind_report,
 )
 from flighttest.errors import FlighttestError
 
@@ -83,6 +92,7 @@ TOPICS = [
     "vehicle_status",
     "vehicle_land_detected",
     "wind",
+    "estimator_wind",
     "wind_estimate",
     "vehicle_local_position_setpoint",
     "trajectory_setpoint",
@@ -267,15 +277,23 @@ def load_ulog(path: Path) -> FlightLog:
             cols["armed"] = resample(ts, (vs["arming_state"] == ARMED).astype(float), t, 1e9, hold=True)
     if (ld := _topic(ulog, "vehicle_land_detected")) is not None and "landed" in ld:
         cols["landed"] = resample(ld["timestamp"] / 1e6, (ld["landed"] != 0).astype(float), t, 1e9, hold=True)
-    wind = _topic(ulog, "wind") or _topic(ulog, "wind_estimate")
-    if wind is not None and "windspeed_north" in wind:
+    reported = None
+    for name in ("wind", "estimator_wind", "wind_estimate"):
+        wind = _topic(ulog, name)
+        if wind is None or not {"windspeed_north", "windspeed_east"} <= wind.keys():
+            continue
         w = np.column_stack([wind["windspeed_north"], wind["windspeed_east"], np.zeros(len(wind["timestamp"]))])
-        wi = resample(wind["timestamp"] / 1e6, w, t, 5.0)
-        cols.update(wn_mps=wi[:, 0], we_mps=wi[:, 1], wd_mps=wi[:, 2])
+        var = [wind[k].astype(float) for k in ("variance_north", "variance_east") if k in wind]
+        sd = np.sqrt(np.maximum(*var)) if len(var) == 2 else None
+        reported = wind_report(name, wind["timestamp"] / 1e6, w, sd, 0.0)
+        cols.update(state_wind(reported, t, 5.0))
+        break
 
     missing: dict[str, str] = {}
     state = fill_derived(build_state(t, None, cols), missing)
     t0 = state.attrs["t_origin_s"]
+    if reported is not None:
+        reported = replace(reported, t_s=reported.t_s - t0)
 
     setpoints = None
     sp = _topic(ulog, "trajectory_setpoint") or _topic(ulog, "vehicle_local_position_setpoint")
@@ -314,4 +332,6 @@ def load_ulog(path: Path) -> FlightLog:
         attitude_source=attitude_source,
         params=params,
         params_source="ulog" if params else None,
+        wind_reported=reported,
+        accel_source="sensor_combined" if "ax_mps2" in cols else None,
     )
