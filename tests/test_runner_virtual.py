@@ -336,7 +336,7 @@ def test_without_a_terminal_a_flight_says_what_it_does(tmp_path):
     said: list[object] = []
     f = fly(tmp_path, request={"print_fn": said.append})
     lines = [x.split("] ", 1)[1] for x in said if isinstance(x, str)]
-    assert lines[5].startswith("wind 0.") and lines[5].endswith("(flighttest): flying the plan for 0 m/s")
+    assert lines[5].startswith("wind 0.") and lines[5].endswith("(flighttest): flying the plan for 0 m/s of wind")
     assert lines[:5] + lines[6:] == ["connected: preflight checks", "arming", "taking off",
                                      f"took off: climbing to {START_M:g} m in OFFBOARD", "settling at the start point",
                                      "descent started", "descent flown: settling at the end point", "landing",

@@ -714,15 +714,15 @@ class MissionRunner:
             judged.append((c, margin, {"planned_wind_mps": round(math.hypot(*planned[:2]), 2),
                                        "duration_s": round(c.duration_s, 2), "margin_mps": round(margin, 3),
                                        "at_s": round(at, 2)}))  # fmt: skip
-        clear = [(c, m) for c, m, _ in judged if m >= 0.0 or self.cfg.guard.observe_region]
+        clear = [j for j in judged if j[1] >= 0.0 or self.cfg.guard.observe_region]
         self.event("wind_plan", **wind.describe(), candidates=[x for *_, x in judged])
         if not clear:
             best = max(judged, key=lambda j: j[1])
             self.abort(f"no plan clears the guard region in the wind at the start, {said} (best margin "
                        f"{best[1]:.2f} m/s)", gd.Rung.HOLD, "wind")  # fmt: skip
             return False
-        chosen = min(clear, key=lambda cm: cm[0].duration_s)[0]
-        self.progress(f"wind {said}: flying the plan for {judged[cands.index(chosen)][2]['planned_wind_mps']:g} m/s")
+        chosen, _, info = min(clear, key=lambda j: j[0].duration_s)
+        self.progress(f"wind {said}: flying the plan for {info['planned_wind_mps']:g} m/s of wind")
         if chosen is not self.req.trajectory:
             check_duration(chosen)
             self.traj = chosen.resample(self.fl.rate_hz)
