@@ -93,13 +93,13 @@ def write_configs(d: CampaignDir) -> None:
 
 
 def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfig, traj: Trajectory,
-         traj_path: str = "") -> dict[str, Any]:  # fmt: skip
+         traj_path: str = "", wind_plans: list[Trajectory] | None = None) -> dict[str, Any]:  # fmt: skip
     from flighttest.flying.runner import FlyRequest, fly
 
     req = FlyRequest(
         connect=ctx.connect(), profile=profile, config=cfg, trajectory=traj, mission_name=step,
         trajectory_path=traj_path, yes=ctx.yes, log_root=ctx.dir.flights, show_panel=ctx.show_panel,
-        confirm=ctx.confirm, print_fn=ctx.print_fn,
+        confirm=ctx.confirm, print_fn=ctx.print_fn, wind_plans=wind_plans or [],
     )  # fmt: skip
     out = asyncio.run(fly(req))
     # log_dir is None when nothing answered (the flight left no folder)
@@ -182,19 +182,30 @@ def run_plan(ctx: StepContext) -> dict[str, Any]:
     found = ctx.state.steps["identify"].outputs.get("onset_found", True)  # older records: always found
     out: dict[str, Any] = {"w_allow_mps": profile.w_allow_mps, "w_allow_from": "identified" if found else "prior"}
     for mission in ("vertical", "helix"):
-        traj = load_mission_module(mission).plan(profile, ctx.config(mission))
+        module = load_mission_module(mission)
+        traj = module.plan(profile, ctx.config(mission))
         path = ctx.dir.plans / f"{mission}.csv"
         traj.save(path)
         out[mission] = str(path)
         out[f"{mission}_t_f_s"] = traj.duration_s
+        # the plans for winds the start hover chooses from (flighttest.planner.wind_plans), made now, kept here
+        for k, wind_plan in enumerate(_wind_plans(ctx, module, profile, mission)):
+            wind_plan.save(ctx.dir.plans / f"{mission}-wind{k + 1}.csv")
     return out
+
+
+def _wind_plans(ctx: StepContext, module: Any, profile: VehicleProfile, mission: str) -> list[Trajectory]:
+    if not hasattr(module, "plans_for_wind"):
+        return []
+    return module.plans_for_wind(profile, ctx.config(mission), ctx.print_fn)
 
 
 def run_descent(ctx: StepContext, mission: str) -> dict[str, Any]:
     profile = ctx.identified_profile()
     path = ctx.state.path("plan", mission)
     traj = Trajectory.load(path, profile)
-    return _fly(ctx, mission, profile, ctx.config(mission), traj, str(path))
+    wind_plans = [Trajectory.load(p, profile) for p in sorted(ctx.dir.plans.glob(f"{mission}-wind*.csv"))]
+    return _fly(ctx, mission, profile, ctx.config(mission), traj, str(path), wind_plans)
 
 
 def run_report(ctx: StepContext) -> dict[str, Any]:
