@@ -21,6 +21,7 @@ from flighttest.errors import FlighttestError
 from flighttest.model.profiles import load_profile
 from sitl_fakes import ardupilot, px4
 from sitl_fakes.disturbance import VrsTruth, default_onset_mps
+from sitl_fakes.drag import parse_truth_drag
 from sitl_fakes.estimator import EstimateError
 from sitl_fakes.link import Link, PortInUse
 from sitl_fakes.telemetry import Telemetry
@@ -60,7 +61,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of fluctuations and gusts (default 0)")
     p.add_argument("--wind-ned", nargs="+", default=["0,0,0"], metavar="N E D",
                    help="steady wind in m/s, NED: 'N E D' (as flighttest fly takes it) or 'N,E,D' (default 0 0 0)")
-    p.add_argument("--gust-mps", type=float, default=0.0, help="gust standard deviation in m/s (default 0)")
+    p.add_argument("--gust-mps", type=float, default=0.0,
+                   help="turbulence standard deviation in m/s, horizontal (vertical: half) (default 0)")
+    p.add_argument("--gust-tau-s", type=float, default=None, metavar="S",
+                   help="one correlation time for the turbulence (default: Dryden's, from the height and airspeed)")
+    p.add_argument("--truth-drag", default=None, metavar="LIN,QUAD",
+                   help="the airframe's true drag per body axis: LIN,QUAD or LX,LY,LZ,QX,QY,QZ in N/(m/s) and "
+                        "N/(m/s)^2, linear term constant (default: the vehicle's, sitl_fakes/drag.py)")
     p.add_argument("--physics-hz", type=float, default=250.0, help="physics rate (default 250)")
     p.add_argument("--telemetry-hz", type=float, default=50.0,
                    help="default rate of LOCAL_POSITION_NED, ATTITUDE_QUATERNION, ODOMETRY (default 50)")
@@ -127,17 +134,29 @@ def build_config(args: argparse.Namespace) -> FakeConfig:
         truth = VrsTruth(onset, args.truth_cone_deg, args.truth_severity, args.seed, profile.v_h_mps)
     except ValueError as exc:
         raise FlighttestError(f"truth: {exc}") from None
-    home, error = {}, EstimateError()
+    gust_tau = getattr(args, "gust_tau_s", None)
+    if gust_tau is not None and not (math.isfinite(gust_tau) and gust_tau > 0):
+        raise FlighttestError(f"--gust-tau-s must be a positive number (got {gust_tau})")
+    drag_text = getattr(args, "truth_drag", None)
+    try:
+        drag = parse_truth_drag(drag_text) if drag_text is not None else None
+    except ValueError as exc:
+        raise FlighttestError(f"--truth-drag: {exc}") from None
+    home, error, extra = {}, EstimateError(), {}
     if getattr(args, "autopilot", "px4") == "ardupilot":  # ArduCopter SITL's home (the reference flights')
         error = ardupilot.SITL_ESTIMATE_ERROR
         home = {"home_lat_deg": ardupilot.HOME_LAT_DEG, "home_lon_deg": ardupilot.HOME_LON_DEG,
                 "home_alt_m": ardupilot.HOME_ALT_M}  # fmt: skip
+        extra["imu_noise_mps2"] = ardupilot.SITL_IMU_NOISE_MPS2
     return FakeConfig(
         **home,
         profile=profile,
         truth=truth,
         wind_ned=_parse_triple(",".join(args.wind_ned), "--wind-ned"),
         gust_mps=args.gust_mps,
+        gust_tau_s=gust_tau,
+        truth_drag=drag,
+        **extra,
         seed=args.seed,
         crash_speed_mps=args.crash_speed_mps,
         gps_delay_s=args.gps_delay_s,
@@ -227,7 +246,9 @@ def run(args: argparse.Namespace) -> int:
         "event",
         f"start vehicle={cfg.profile.name}{personality.replace(' (', ' autopilot=').rstrip(')')} "
         f"onset_mps={t.onset_mps:.4f} cone_deg={t.cone_deg} "
-        f"severity={t.severity} seed={t.seed} wind_ned={cfg.wind_ned} gust_mps={cfg.gust_mps}",
+        f"severity={t.severity} seed={t.seed} wind_ned={cfg.wind_ned} gust_mps={cfg.gust_mps} "
+        f"gust_tau_s={cfg.gust_tau_s if cfg.gust_tau_s is not None else 'dryden'} "
+        f"drag=({vehicle.body.drag.describe()})",
     )
     try:
         _loop(vehicle, link, log, 1.0 / args.physics_hz, stop, args.duration_s)

@@ -16,6 +16,7 @@ from sitl_fakes.estimator import EstimateError
 from sitl_fakes.link import mavlink as M
 
 MEMINFO_ID = 152  # ardupilotmega.xml's MEMINFO (not in common.xml; built in ardupilot_telemetry)
+WIND_ID = 168  # ardupilotmega.xml's WIND (direction the wind comes from, speed, vertical speed)
 
 
 class CopterMode(IntEnum):
@@ -86,6 +87,9 @@ SITL_ESTIMATE_ERROR = EstimateError(
     horizontal_vel_sigma_mps=0.016, horizontal_vel_tau_s=3.0, vertical_vel_sigma_mps=0.012,
     vertical_vel_tau_s=0.3, velocity_smoothing_s=0.05,
 )
+# ArduCopter SITL's accelerometer is clean (SIM_ACC1_RND 0, no vibration): HIGHRES_IMU in ../shared/wind_sitl
+# varies by 0.0006 m/s² per axis between samples
+SITL_IMU_NOISE_MPS2 = 0.0006
 # ArduCopter SITL took ~42 s from boot to "EKF3 IMU0 is using GPS" and prearm OK (../shared/ardupilot_sitl)
 EKF_DELAY_S = 42.0
 # the text ArduCopter answers an arm command with while its EKF has no origin yet (AP_Arming gps checks)
@@ -186,6 +190,8 @@ def _table() -> dict[str, tuple[float, int]]:
         "LOIT_ACC_MAX_M": (5.0, f), "LOIT_BRK_ACC_M": (2.5, f), "LOIT_BRK_JRK_M": (5.0, f), "LOIT_BRK_DELAY": (1.0, f),
         # frame and estimator
         "FRAME_CLASS": (1, i8), "FRAME_TYPE": (0, i8), "AHRS_EKF_TYPE": (3, i8), "EK3_ENABLE": (1, i8),
+        # EKF3's drag fusion: ballistic coefficients (kg/m²) and momentum drag (1/s), all 0 = off (no wind states)
+        "EK3_DRAG_BCOEF_X": (0.0, f), "EK3_DRAG_BCOEF_Y": (0.0, f), "EK3_DRAG_MCOEF": (0.0, f),
         # stream rates of the GCS link (Hz; read at boot, as ArduCopter: changing them later does not restart
         # the streams on the link)
         "MAV1_RAW_SENS": (0, i16), "MAV1_EXT_STAT": (0, i16), "MAV1_RC_CHAN": (0, i16), "MAV1_RAW_CTRL": (0, i16),
@@ -222,7 +228,7 @@ STREAM_GROUPS: dict[str, tuple[int, ...]] = {
     "MAV1_POSITION": (M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
     "MAV1_EXTRA1": (M.MAVLINK_MSG_ID_ATTITUDE,),
     "MAV1_EXTRA2": (M.MAVLINK_MSG_ID_VFR_HUD,),
-    "MAV1_EXTRA3": (M.MAVLINK_MSG_ID_BATTERY_STATUS, M.MAVLINK_MSG_ID_SYSTEM_TIME),
+    "MAV1_EXTRA3": (WIND_ID, M.MAVLINK_MSG_ID_BATTERY_STATUS, M.MAVLINK_MSG_ID_SYSTEM_TIME),
     "MAV1_PARAMS": (),
     "MAV1_ADSB": (),
 }  # fmt: skip

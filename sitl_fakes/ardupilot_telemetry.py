@@ -15,6 +15,7 @@ import time
 
 from pymavlink.dialects.v20 import ardupilotmega as APM
 
+from flighttest.model.aero import G_MPS2
 from sitl_fakes import ardupilot as ap
 from sitl_fakes.ardupilot import CopterMode
 from sitl_fakes.link import mavlink
@@ -41,6 +42,7 @@ class ArduPilotTelemetry(Telemetry):
             M.MAVLINK_MSG_ID_RC_CHANNELS: self.rc_channels,
             M.MAVLINK_MSG_ID_SYSTEM_TIME: self.system_time,
             M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self.gps_global_origin,
+            ap.WIND_ID: self.wind,
         })  # fmt: skip
         # group rates from the boot parameters; per-message overrides (None: follow the group)
         self.group_hz: dict[str, float] = {g: max(float(vehicle.p(g)), 0.0) for g in ap.STREAM_GROUPS}
@@ -188,9 +190,23 @@ class ArduPilotTelemetry(Telemetry):
                                                        alt_error, 0.0, 0.0)  # fmt: skip
 
     def raw_imu(self):
+        # ArduPilot's RAW_IMU: specific force in milli-g (GRAVITY_MSS), rates in mrad/s
+        fx, fy, fz = self.specific_force_mps2()
         s = self.v.body.state
-        return M.MAVLink_raw_imu_message(self.boot_us(), 0, 0, -1000, int(s.p_radps * 1000), int(s.q_radps * 1000),
+        return M.MAVLink_raw_imu_message(self.boot_us(), round(fx * 1000 / G_MPS2), round(fy * 1000 / G_MPS2),
+                                         round(fz * 1000 / G_MPS2), int(s.p_radps * 1000), int(s.q_radps * 1000),
                                          int(s.r_radps * 1000), 0, 0, 0)  # fmt: skip
+
+    def wind(self):
+        """ArduCopter's WIND (GCS_MAVLINK_Copter::send_wind): sent while the EKF has a position (its airspeed
+        vector); the direction the wind comes *from* (deg), its speed and vertical speed. EKF3's wind states stay
+        at zero unless drag fusion runs (EK3_DRAG_*): then it is its lagging, noisy estimate."""
+        w = self.v.wind_report()
+        if w is None:
+            return None
+        wn, we, wd = w
+        return APM.MAVLink_wind_message(math.degrees(math.atan2(-we, -wn)), math.sqrt(wn * wn + we * we + wd * wd),
+                                        wd)  # fmt: skip
 
     def scaled_pressure(self):
         return M.MAVLink_scaled_pressure_message(self.boot_ms(), 1013.25 - (-self.v.body.state.d_m) * 0.12, 0.0, 2500)

@@ -28,6 +28,7 @@ from sitl_fakes import ardupilot as ap
 from sitl_fakes.ardupilot import CopterMode
 from sitl_fakes.ardupilot_control import THR_MIN, PosControl, VerticalAccelPid, copter_limits, sqrt_controller
 from sitl_fakes.control import NAN, Limits, Target, finite, lowpass_alpha
+from sitl_fakes.drag_fusion import DragFusionModel
 from sitl_fakes.link import Link, mavlink
 from sitl_fakes.physics import rotate_body_to_ned
 from sitl_fakes.truthlog import TruthLog
@@ -119,6 +120,17 @@ class FakeArduCopter(_FakeVehicleBase):
     # -- helpers -------------------------------------------------------------------------------------
     def position_valid(self) -> bool:
         return self.t_s >= max(self.cfg.gps_delay_s, self.ekf_delay_s)
+
+    def drag_fusion_model(self) -> DragFusionModel:
+        """EKF3's drag model: on as soon as a ballistic or the momentum coefficient is set."""
+        return DragFusionModel(self.p("EK3_DRAG_MCOEF"), self.p("EK3_DRAG_BCOEF_X"), self.p("EK3_DRAG_BCOEF_Y"))
+
+    def wind_report(self) -> tuple[float, float, float] | None:
+        """EKF3's wind states (ArduCopter's WIND): zero until drag fusion has run in the air (its wind states are
+        inhibited), then its estimate, kept on the ground; None before the EKF has its origin."""
+        if not self.ekf_ready:
+            return None
+        return self.wind_estimate.wind_ned_mps if self.wind_estimate.started else (0.0, 0.0, 0.0)
 
     def armable(self) -> bool:
         return self.position_valid() and not self.crashed

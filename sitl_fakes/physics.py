@@ -1,5 +1,5 @@
-"""Rigid-body quadcopter as PX4's SIH: quaternion attitude, four rotor thrusts with motor lag, linear drag,
-ground contact.
+"""Rigid-body quadcopter as PX4's SIH: quaternion attitude, four rotor thrusts with motor lag, the airframe's
+own drag (``sitl_fakes.drag``: linear and quadratic per body axis), ground contact.
 
 Plain-float arithmetic on purpose: at 250 Hz a 3-vector through numpy costs more than the maths.
 Frames as in CONVENTIONS §1: NED inertial, FRD body, ``q = (w, x, y, z)`` rotates body → NED.
@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 
 from flighttest.model.aero import G_MPS2
 from flighttest.model.profiles import VehicleProfile
+from sitl_fakes.drag import TruthDrag, truth_drag_for
 
 # PX4 SIH's defaults (../shared/px4_sih): motor time constant SIH_T_TAU and rotational damping SIH_KDW
-# (N m per rad/s). Linear drag (SIH_KDV, N per m/s of air-relative velocity) is the profile's
-# drag_n_per_mps: SIH's model, which the autopilot's feed-forward does not know.
+# (N m per rad/s). The drag is the airframe's truth (sitl_fakes.drag), which the autopilot does not know.
 MOTOR_TIME_CONSTANT_S = 0.05
 ROT_DAMPING_NM_PER_RADPS = 0.025
 # rotor i: (x sign, y sign, spin sign: +1 CCW)
@@ -64,6 +64,11 @@ class RigidBodyState:
     an_mps2: float = 0.0  # last NED acceleration (for the IMU)
     ae_mps2: float = 0.0
     ad_mps2: float = 0.0
+    # last specific force in the body frame (what the IMU measures: thrust and drag over the mass), and the drag
+    fx_mps2: float = 0.0
+    fy_mps2: float = 0.0
+    fz_mps2: float = -G_MPS2
+    drag_body_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
     thrust_n: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 0.0])  # actual rotor thrusts
     on_ground: bool = True
 
@@ -79,7 +84,7 @@ class RigidBodyState:
 class QuadBody:
     """Integrates the rigid body from commanded rotor thrusts and per-rotor thrust factors."""
 
-    def __init__(self, profile: VehicleProfile):
+    def __init__(self, profile: VehicleProfile, drag: TruthDrag | None = None):
         self.profile = profile
         self.mass_kg = profile.mass_kg
         self.ixx, self.iyy, self.izz = profile.inertia_kgm2
@@ -87,7 +92,9 @@ class QuadBody:
         self.k_yaw_m = profile.yaw_moment_per_thrust_m
         self.max_thrust_n = profile.max_thrust_per_rotor_n
         self.motor_tau_s = MOTOR_TIME_CONSTANT_S
-        self.drag_n_per_mps = profile.drag_n_per_mps
+        self.drag = truth_drag_for(profile) if drag is None else drag
+        # the momentum drag's thrust scale: Σ√T_i against n·√T_hover
+        self._inv_hover_sqrt = 1.0 / (profile.n_rotors * math.sqrt(profile.mass_kg * G_MPS2 / profile.n_rotors))
         self.rot_damping = ROT_DAMPING_NM_PER_RADPS
         self.state = RigidBodyState()
 
@@ -108,13 +115,19 @@ class QuadBody:
         total = t1 + t2 + t3 + t4
 
         qw, qx, qy, qz = s.qw, s.qx, s.qy, s.qz
-        fn, fe, fd = rotate_body_to_ned(0.0, 0.0, -total, qw, qx, qy, qz)
-        van, vae, vad = s.vn_mps - wind_ned[0], s.ve_mps - wind_ned[1], s.vd_mps - wind_ned[2]
-        c = self.drag_n_per_mps
+        # drag on the air-relative velocity in the body frame; thrust along −z_body
+        bx, by, bz = rotate_ned_to_body(s.vn_mps - wind_ned[0], s.ve_mps - wind_ned[1], s.vd_mps - wind_ned[2],
+                                        qw, qx, qy, qz)  # fmt: skip
+        drag = self.drag
+        scale = 1.0
+        if drag.momentum:
+            scale = (math.sqrt(t1) + math.sqrt(t2) + math.sqrt(t3) + math.sqrt(t4)) * self._inv_hover_sqrt
+        dx, dy, dz = drag.force_body_n(bx, by, bz, scale)
+        fn, fe, fd = rotate_body_to_ned(dx, dy, dz - total, qw, qx, qy, qz)
         m = self.mass_kg
-        an = (fn - c * van) / m
-        ae = (fe - c * vae) / m
-        ad = (fd - c * vad) / m + G_MPS2
+        an = fn / m
+        ae = fe / m
+        ad = fd / m + G_MPS2
 
         # Euler's equations, body frame
         p, q, r = s.p_radps, s.q_radps, s.r_radps
@@ -134,6 +147,8 @@ class QuadBody:
                 s.p_radps = s.q_radps = s.r_radps = 0.0
                 s.an_mps2 = s.ae_mps2 = s.ad_mps2 = 0.0
                 self._level(keep_yaw=True)
+                s.fx_mps2, s.fy_mps2, s.fz_mps2 = rotate_ned_to_body(0.0, 0.0, -G_MPS2, s.qw, s.qx, s.qy, s.qz)
+                s.drag_body_n = (0.0, 0.0, 0.0)
                 return 0.0
 
         s.vn_mps += an * dt_s
@@ -143,6 +158,8 @@ class QuadBody:
         s.e_m += s.ve_mps * dt_s
         s.d_m += s.vd_mps * dt_s
         s.an_mps2, s.ae_mps2, s.ad_mps2 = an, ae, ad
+        s.fx_mps2, s.fy_mps2, s.fz_mps2 = dx / m, dy / m, (dz - total) / m
+        s.drag_body_n = (dx, dy, dz)
         p += pd * dt_s
         q += qd * dt_s
         r += rd * dt_s

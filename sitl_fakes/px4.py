@@ -103,6 +103,12 @@ def default_params() -> dict[str, Param]:
         "MC_ROLLRATE_MAX": Param(220.0, f),
         "MC_PITCHRATE_MAX": Param(220.0, f),
         "MC_YAWRATE_MAX": Param(200.0, f),
+        # EKF2's drag fusion (off by default: no wind estimate on a multicopter, no WIND_COV); its model's
+        # ballistic coefficients (kg/m²) and momentum drag (1/s), PX4's defaults
+        "EKF2_DRAG_CTRL": Param(0, i),
+        "EKF2_BCOEF_X": Param(100.0, f),
+        "EKF2_BCOEF_Y": Param(100.0, f),
+        "EKF2_MCOEF": Param(0.15, f),
         "RTL_RETURN_ALT": Param(30.0, f),
         "NAV_DLL_ACT": Param(0, i),
         "SYS_AUTOSTART": Param(10040, i),  # sihsim_quadx

@@ -15,7 +15,6 @@ import math
 import random
 import time
 
-from flighttest.model.aero import G_MPS2
 from sitl_fakes.link import mavlink
 from sitl_fakes.physics import rotate_ned_to_body
 from sitl_fakes.px4 import Mode
@@ -109,6 +108,8 @@ class Telemetry:
         self._gap_until = -math.inf
         self._last_tick = vehicle.t0
         self.gaps = 0
+        self._imu_rng = random.Random(cfg.seed * 15485863 + 11)
+        self._imu_noise = cfg.imu_noise_mps2
 
     # -- scheduling ----------------------------------------------------------------------------------
     def can_send(self, msg_id: int) -> bool:
@@ -131,8 +132,11 @@ class Telemetry:
 
     def send_now(self, msg_id: int) -> None:
         builder = self.builders.get(msg_id)
-        if builder is not None:
-            self.v.link.send(builder())
+        if builder is None:
+            return
+        msg = builder()
+        if msg is not None:  # a message with nothing to say this time (WIND_COV without an estimate) is not sent
+            self.v.link.send(msg)
             self.sent += 1
 
     def truth_due(self, now: float) -> bool:
@@ -283,10 +287,19 @@ class Telemetry:
             0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, 2500, cells, current_ca, -1, -1, 90
         )
 
+    def specific_force_mps2(self) -> tuple[float, float, float]:
+        """The accelerometer: the body's specific force (thrust and drag over the mass, −g on the ground) with
+        the autopilot's noise."""
+        s = self.v.body.state
+        n = self._imu_noise
+        if n <= 0.0:
+            return s.fx_mps2, s.fy_mps2, s.fz_mps2
+        g = self._imu_rng.gauss
+        return s.fx_mps2 + n * g(0.0, 1.0), s.fy_mps2 + n * g(0.0, 1.0), s.fz_mps2 + n * g(0.0, 1.0)
+
     def highres_imu(self):
         s = self.v.body.state
-        # specific force in body axes: acceleration minus gravity, rotated
-        fx, fy, fz = rotate_ned_to_body(s.an_mps2, s.ae_mps2, s.ad_mps2 - G_MPS2, s.qw, s.qx, s.qy, s.qz)
+        fx, fy, fz = self.specific_force_mps2()
         return M.MAVLink_highres_imu_message(
             self.boot_us(), fx, fy, fz, s.p_radps, s.q_radps, s.r_radps, 0.21, 0.01, 0.42,
             1013.25 - (-s.d_m) * 0.12, 0.0, -s.d_m, 25.0, 0x1FFF,
@@ -306,8 +319,15 @@ class Telemetry:
         return M.MAVLink_actuator_output_status_message(self.boot_us(), 4, out)
 
     def wind_cov(self):
-        w = self.v.wind.ned
-        return M.MAVLink_wind_cov_message(self.boot_us(), w[0], w[1], w[2], 0.1, 0.05, -self.v.body.state.d_m, 0.3, 0.2)
+        """PX4's WIND_COV (mavlink/streams/WIND_COV.hpp): only once EKF2 estimates the wind (EKF2_DRAG_CTRL), its
+        estimate, var_horiz = the north and east variances summed (m²/s², as PX4 fills it), no vertical wind,
+        the altitude AMSL; PX4 leaves var_vert and both accuracies 0."""
+        w = self.v.wind_report()
+        if w is None:
+            return None
+        var_n, var_e = self.v.wind_estimate.var_mps2
+        return M.MAVLink_wind_cov_message(self.boot_us(), w[0], w[1], 0.0, var_n + var_e, 0.0,
+                                          self.v.cfg.home_alt_m - self.v.est.d_m, 0.0, 0.0)  # fmt: skip
 
     def vfr_hud(self):
         s = self.v.est

@@ -9,6 +9,8 @@ import math
 import time
 from pathlib import Path
 
+from sitl_fakes.physics import rotate_ned_to_body
+
 COLUMNS = (
     "t_s", "unix_s", "kind", "mode", "armed", "landed",
     "n_m", "e_m", "d_m", "vn_mps", "ve_mps", "vd_mps",
@@ -16,6 +18,8 @@ COLUMNS = (
     "wind_n_mps", "wind_e_mps", "wind_d_mps",
     "w_mps", "u_mps", "depth_n", "region", "thrust_loss", "dT_T",
     "t1_n", "t2_n", "t3_n", "t4_n",
+    "gust_n_mps", "gust_e_mps", "gust_d_mps", "vax_mps", "vay_mps", "vaz_mps", "fx_mps2", "fy_mps2", "fz_mps2",
+    "est_wind_n_mps", "est_wind_e_mps",
     "sp_source", "sp_type_mask", "sp_n_m", "sp_e_m", "sp_d_m", "sp_vn_mps", "sp_ve_mps", "sp_vd_mps",
     "sp_an_mps2", "sp_ae_mps2", "sp_ad_mps2", "sp_yaw_deg",
     "detail",
@@ -50,8 +54,10 @@ class TruthLog:
         self.n_cols = len(COLUMNS)
 
     def row(self, now: float, kind: str, mode: str, armed: bool, landed: bool, state=None, dist=None,
-            wind=(0.0, 0.0, 0.0), sp=None, detail: str = "") -> None:  # fmt: skip
-        """``state``: RigidBodyState; ``dist``: Disturbance; ``sp``: (source, type_mask, Target)."""
+            wind=(0.0, 0.0, 0.0), sp=None, detail: str = "", gust=None, est_wind=None) -> None:  # fmt: skip
+        """``state``: RigidBodyState; ``dist``: Disturbance; ``wind``: the true wind (NED), ``gust``: its
+        turbulence part; ``est_wind``: the autopilot's wind estimate (None: it has none);
+        ``sp``: (source, type_mask, Target)."""
         if self.fh is None:
             return
         flags = ["1" if armed else "0", "1" if landed else "0"]
@@ -67,9 +73,14 @@ class TruthLog:
         else:
             parts += [""] * 6
         if state is not None:
-            parts += [_f(t) for t in state.thrust_n]
+            s = state
+            parts += [_f(t) for t in s.thrust_n]
+            parts += [_f(g) for g in gust] if gust is not None else [""] * 3
+            air = rotate_ned_to_body(s.vn_mps - wind[0], s.ve_mps - wind[1], s.vd_mps - wind[2], s.qw, s.qx, s.qy, s.qz)
+            parts += [_f(v) for v in (*air, s.fx_mps2, s.fy_mps2, s.fz_mps2)]
         else:
-            parts += [""] * 4
+            parts += [""] * 13
+        parts += [_f(est_wind[0]), _f(est_wind[1])] if est_wind is not None else ["", ""]
         if sp is not None:
             source, mask, t = sp
             yaw = math.degrees(t.yaw_rad) if t.yaw_rad == t.yaw_rad else math.nan

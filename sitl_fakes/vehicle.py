@@ -15,6 +15,8 @@ from flighttest.model.profiles import VehicleProfile
 from sitl_fakes import px4
 from sitl_fakes.control import NAN, Controller, Limits, Target, finite
 from sitl_fakes.disturbance import Disturbance, VrsTruth
+from sitl_fakes.drag import TruthDrag
+from sitl_fakes.drag_fusion import DragFusionModel, DragFusionWind
 from sitl_fakes.estimator import EstimateError, Estimator
 from sitl_fakes.link import Link, mavlink
 from sitl_fakes.physics import QuadBody
@@ -29,6 +31,9 @@ RTL_ACCEPT_M = 1.0
 RTL_SPEED_MPS = 5.0
 IDLE_THRUST_FRACTION = 0.05
 FORCE_ARM_MAGIC = 21196
+# PX4 SIH's accelerometer as HIGHRES_IMU carries it (../shared/wind_sitl: 0.068 m/s² per axis, white, in the air
+# and on the ground; SIH adds 0.1 m/s² of Gaussian noise to the specific force and PX4 filters it)
+PX4_IMU_NOISE_MPS2 = 0.07
 
 # MAV_RESULT
 ACCEPTED, TEMP_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
@@ -47,6 +52,9 @@ class FakeConfig:
     truth: VrsTruth
     wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gust_mps: float = 0.0
+    gust_tau_s: float | None = None  # one correlation time for the turbulence; None: Dryden's (sitl_fakes.wind)
+    truth_drag: TruthDrag | None = None  # None: the airframe's (sitl_fakes.drag.TRUTH_DRAG)
+    imu_noise_mps2: float = PX4_IMU_NOISE_MPS2  # HIGHRES_IMU's accelerometer noise, 1 σ per axis
     seed: int = 0
     crash_speed_mps: float = 2.5
     crash_tilt_deg: float = 60.0
@@ -69,12 +77,13 @@ class FakePx4:
         self.t0 = t0
         self.now = t0
         self.profile = cfg.profile
-        self.body = QuadBody(cfg.profile)
+        self.body = QuadBody(cfg.profile, cfg.truth_drag)
         self.ctrl = Controller(cfg.profile)
         self.estimator = Estimator(cfg.estimate_error, cfg.seed)
         self.est = self.estimator.estimate(self.body.state)
         self.dist = Disturbance(cfg.truth)
-        self.wind = Wind(cfg.wind_ned, cfg.gust_mps, cfg.seed)
+        self.wind = Wind(cfg.wind_ned, cfg.gust_mps, cfg.seed, cfg.gust_tau_s)
+        self.wind_estimate = DragFusionWind(cfg.seed)  # the autopilot's own, with drag fusion on
         self.params = px4.default_params()
         self.params["MPC_TILTMAX_AIR"].value = min(45.0, cfg.profile.max_tilt_deg)
         # PX4's hover-thrust estimator converges within seconds: start it at the vehicle's truth
@@ -126,8 +135,20 @@ class FakePx4:
     def limits(self) -> Limits:
         return Limits.from_params(self.p, self.profile)
 
+    def drag_fusion_model(self) -> DragFusionModel:
+        """EKF2's drag model, used only with EKF2_DRAG_CTRL set (its wind states run only then)."""
+        if int(self.p("EKF2_DRAG_CTRL")) <= 0:
+            return DragFusionModel(0.0, 0.0, 0.0)
+        return DragFusionModel(self.p("EKF2_MCOEF"), self.p("EKF2_BCOEF_X"), self.p("EKF2_BCOEF_Y"))
+
+    def wind_report(self) -> tuple[float, float, float] | None:
+        """The wind the autopilot reports (PX4: WIND_COV, only once EKF2 estimates it), else None."""
+        est = self.wind_estimate
+        return est.wind_ned_mps if est.started and self.drag_fusion_model().used else None
+
     def event(self, kind: str, detail: str, severity: int | None = None) -> None:
-        self.log.row(self.now, kind, self.mode.name, self.armed, self.landed(), self.body.state, detail=detail)
+        self.log.row(self.now, kind, self.mode.name, self.armed, self.landed(), self.body.state,
+                     wind=self.wind.ned, detail=detail, gust=self.wind.gust)  # fmt: skip
         if severity is not None:
             self.statustext(severity, detail)
 
@@ -184,11 +205,16 @@ class FakePx4:
             self.thrust_cmd = self._control(dt_s)
         else:
             self.thrust_cmd = [0.0, 0.0, 0.0, 0.0]
-        wind = self.wind.step(dt_s)
+        wind = self.wind.step(dt_s, -s.d_m, (s.vn_mps, s.ve_mps, s.vd_mps))
         factors = self.dist.step(dt_s, s.vn_mps, s.ve_mps, s.vd_mps, s.qw, s.qx, s.qy, s.qz, *wind)
+        if self.log.fh is not None and self.telemetry is not None and self.telemetry.truth_due(now):
+            # the state at ``now``, with the wind and the air-relative velocity the disturbance sees in it
+            self.log.row(now, "state", self.mode.name, self.armed, s.on_ground, s, self.dist, wind, self.active_sp,
+                         gust=self.wind.gust, est_wind=self.wind_report())  # fmt: skip
         was_airborne = not s.on_ground
         tilt_deg = math.degrees(s.tilt_rad())
         contact = self.body.step(dt_s, self.thrust_cmd, factors, wind)
+        self.wind_estimate.step(dt_s, self.drag_fusion_model(), not s.on_ground, s)
         if not s.on_ground:
             self.has_flown = True
         if was_airborne and contact > 0.0:
@@ -197,8 +223,6 @@ class FakePx4:
             self.ground_since = now
         if self.crashed:
             self.body.state.thrust_n[:] = [0.0, 0.0, 0.0, 0.0]
-        if self.log.fh is not None and self.telemetry is not None and self.telemetry.truth_due(now):
-            self.log.row(now, "state", self.mode.name, self.armed, s.on_ground, s, self.dist, wind, self.active_sp)
 
     def _touchdown(self, speed_mps: float, tilt_deg: float) -> None:
         if speed_mps > self.cfg.crash_speed_mps or tilt_deg > self.cfg.crash_tilt_deg:
@@ -206,8 +230,8 @@ class FakePx4:
             self.crash_reason = f"crash: touchdown at {speed_mps:.2f} m/s, tilt {tilt_deg:.0f} deg"
             self.armed = False
             self.heartbeat_due = True
-            self.log.row(self.now, "crash", self.mode.name, False, True, self.body.state, self.dist,
-                         detail=self.crash_reason)  # fmt: skip
+            self.log.row(self.now, "crash", self.mode.name, False, True, self.body.state, self.dist, self.wind.ned,
+                         detail=self.crash_reason, gust=self.wind.gust)  # fmt: skip
             self.statustext(mavlink.MAV_SEVERITY_CRITICAL, self.crash_reason)
         else:
             self.event("event", f"touchdown at {speed_mps:.2f} m/s")

@@ -485,7 +485,9 @@ def test_takeoff_guided_descent_step_hold_brake_land(fake_vehicle_factory):
     from mavsdk.asyncio.plugins.offboard import AccelerationNed, OffboardAsync, PositionNedYaw, VelocityNedYaw
     from mavsdk.asyncio.plugins.telemetry import FlightMode, TelemetryAsync
 
-    fake = fake_vehicle_factory(autopilot="ardupilot", ekf_delay_s=EKF_DELAY_S, estimate_error=0, truth_severity=0)
+    # SITL's own quad, the airframe the reference flew (its drag damps the sink as SITL's does: sitl_fakes/drag.py)
+    fake = fake_vehicle_factory("arducopter_sitl", autopilot="ardupilot", ekf_delay_s=EKF_DELAY_S, estimate_error=0,
+                                truth_severity=0)  # fmt: skip
     watcher = _ModeWatcher(fake)  # the HEARTBEAT's custom_mode: MAVSDK reports BRAKE and LOITER both as HOLD
     alt_m = 3.0
 
@@ -582,8 +584,9 @@ def test_takeoff_guided_descent_step_hold_brake_land(fake_vehicle_factory):
     g = st[(st.t_s > t_step) & (st.t_s < t_step + 1.2)]
     # ramps at ~WP_ACC_Z: 0.3 s in, far from the 4.9 m/s² asked (reference: 0.14 m/s at 0.3 s)
     assert float(np.interp(t_step + 0.3, g.t_s, g.vd_mps)) < 0.3
-    # overshoots the 0.60 m/s plan as the reference did (0.84-0.99 m/s)
-    assert 0.72 < g.vd_mps.max() < 1.05
+    # overshoots the 0.60 m/s plan as the reference did (0.84-0.99 m/s), within the replay's band (1.06:
+    # test_guided_descent_step_matches_vertical_guard_abort)
+    assert 0.72 < g.vd_mps.max() < 1.06
     # BRAKE arrests the sink at its shaping's 0.67 per second (see test_brake_stops_and_holds_ignoring_the_sticks)
     brake = st[st["mode"] == "BRAKE"]
     dur = float(brake.t_s.iloc[-1] - brake.t_s.iloc[0])

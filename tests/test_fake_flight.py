@@ -29,6 +29,7 @@ from pymavlink import mavutil
 
 from flighttest.model.profiles import load_profile
 from sitl_fakes.disturbance import default_onset_mps
+from sitl_fakes.drag import truth_drag_for
 
 pytestmark = pytest.mark.flight
 
@@ -190,10 +191,12 @@ def test_offboard_position_velocity_acceleration_tracking(fake_vehicle_factory):
     # skip the first 0.3 s (motor lag and attitude change), then fit dv/dt
     acc = acc[acc.t_s > acc.t_s.iloc[0] + 0.3]
     slope = (acc.vn_mps.iloc[-1] - acc.vn_mps.iloc[0]) / (acc.t_s.iloc[-1] - acc.t_s.iloc[0])
-    # PX4 turns the feed-forward into thrust as if nothing but gravity acted: SIH's linear drag
-    # (drag_n_per_mps) takes its share of the 0.6 m/s²
+    # PX4 turns the feed-forward into thrust as if nothing but gravity acted: the airframe's drag (the fake's
+    # truth, sitl_fakes.drag) takes its share of the 0.6 m/s²
     prof = load_profile("x500")
-    assert slope == pytest.approx(0.6 - prof.drag_n_per_mps / prof.mass_kg * acc.vn_mps.mean(), abs=0.15)
+    drag, v = truth_drag_for(prof), acc.vn_mps.mean()
+    drag_mps2 = (drag.linear_n_per_mps[0] * v + drag.quadratic_n_per_mps2[0] * v * v) / prof.mass_kg
+    assert slope == pytest.approx(0.6 - drag_mps2, abs=0.15)
 
 
 def test_offboard_refused_without_setpoint_stream(fake_vehicle_factory):

@@ -43,6 +43,9 @@ def run_fake(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess:
         (["--param", "NOPE=1"], "--param"),
         (["--peer", "localhost"], "--peer"),
         (["--physics-hz", "0"], "--physics-hz"),
+        (["--truth-drag", "1,x"], "--truth-drag"),
+        (["--truth-drag=-1,0"], "--truth-drag"),
+        (["--gust-tau-s", "-2"], "--gust-tau-s"),
         (["--truth-log", "/proc/nope/truth.csv"], "--truth-log"),
     ],
 )

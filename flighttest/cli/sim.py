@@ -22,12 +22,16 @@ _RANGES = {
     "truth_rate_hz": ("--truth-rate-hz", ip.Range(0.0, 2000.0, "Hz")),
     "seed": ("--seed", ip.Range(0, 2**32 - 1, integer=True)),
     "gust_mps": ("--gust-mps", ip.Range(0.0, ip.MAX_WIND_MPS, "m/s")),
+    "gust_tau_s": ("--gust-tau-s", ip.Range(0.01, 3600.0, "s")),
     "physics_hz": ("--physics-hz", ip.Range(50.0, 2000.0, "Hz")),
     "telemetry_hz": ("--telemetry-hz", ip.Range(1.0, 500.0, "Hz")),
     "crash_speed_mps": ("--crash-speed-mps", ip.Range(0.0, ip.MAX_SPEED_MPS, "m/s", lo_open=True)),
     "gps_delay_s": ("--gps-delay-s", ip.Range(0.0, 3600.0, "s")),
     "duration_s": ("--duration-s", ip.Range(0.0, 7 * 24 * 3600.0, "s")),
 }
+
+# a drag coefficient per body axis: 1000 N per m/s (or per (m/s)²) would stop any airframe flighttest flies
+TRUTH_DRAG_COEF = ip.Range(0.0, 1000.0)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,6 +55,13 @@ def check_args(args: argparse.Namespace) -> None:
             rng.check(value, flag)
     if args.truth_log is not None:
         ip.check_output_path(args.truth_log, "--truth-log")
+    if getattr(args, "truth_drag", None) is not None:
+        for i, part in enumerate(str(args.truth_drag).split(",")):
+            try:
+                value = float(part)
+            except ValueError:
+                continue  # sitl_fakes words a non-number itself
+            TRUTH_DRAG_COEF.check(value, f"--truth-drag value {i + 1}")
     for i, text in enumerate(args.wind_ned):
         for part in str(text).split(","):
             if part.strip():
