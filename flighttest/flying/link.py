@@ -601,7 +601,12 @@ class VehicleLink:
             vals = (w.wind_x_ned_m_s, w.wind_y_ned_m_s, w.wind_z_ned_m_s)
             if all(math.isfinite(x) for x in vals):
                 st.wind_ned_mps, st.t_wind = vals, t
-                st.wind_accuracy_mps = w.horizontal_wind_speed_accuracy_m_s
+                # PX4 leaves WIND_COV's horiz_accuracy 0 and puts a variance (m²/s²) in var_horiz, which MAVSDK
+                # hands over as the "variability": whichever reading is larger, so never the kinder one
+                var = w.horizontal_variability_stddev_m_s
+                spread = max(var, math.sqrt(var)) if math.isfinite(var) and var > 0 else math.nan
+                acc = w.horizontal_wind_speed_accuracy_m_s
+                st.wind_accuracy_mps = acc if math.isfinite(acc) and acc > 0 else spread
 
         def set_mode(name: str) -> None:
             old, st.flight_mode = st.flight_mode, name

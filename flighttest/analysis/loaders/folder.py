@@ -167,6 +167,9 @@ def _clean_event(ev: dict, dropped: dict[str, int]) -> dict:
         if isinstance(value, dict):  # a record of its own (the collector's per-generation max_ms)
             out[key] = value
             continue
+        if isinstance(value, list) and "_ned_" in key and value and all(_finite(v) for v in value):
+            out[key] = value  # a vector (wind_ned_mps), each component a number
+            continue
         negative_span = _NON_NEGATIVE_FIELD.search(key) is not None and key not in SIGNED_FIELDS
         bad = not _finite(value) or (negative_span and value < 0)
         if _UNIT_FIELD.search(key) and value is not None and bad:
