@@ -38,6 +38,7 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
         margin=TrackingMargin.from_plan(p),
         n_intervals=hp.n_intervals,
         n_coarse=hp.n_coarse,
+        wind_radius_mps=hp.calm_wind_radius_mps,
     )
     sol = solve_helix(problem)
     if not sol.success:

@@ -25,14 +25,15 @@ STOP_TIMEOUT_S = 5.0
 
 
 def _option(name: str, value: Any) -> list[str]:
-    """``truth_onset=1.2`` → ``--truth-onset 1.2``; tuples join with commas; dict/list repeat."""
+    """``truth_onset=1.2`` → ``--truth-onset 1.2``; tuples join with commas (``--wind-ned=-2,1,0``); dict/list
+    repeat."""
     flag = "--" + name.replace("_", "-")
     if isinstance(value, dict):
         return [x for k, v in value.items() for x in (flag, f"{k}={v}")]
     if isinstance(value, list):
         return [x for v in value for x in (flag, str(v))]
-    if isinstance(value, tuple):
-        return [flag, ",".join(str(v) for v in value)]
+    if isinstance(value, tuple):  # one "--flag=a,b,c": a leading minus would read as another option
+        return [f"{flag}={','.join(str(v) for v in value)}"]
     return [flag, str(value)]
 
 

@@ -103,7 +103,7 @@ class ScriptedAutopilot:
     # vehicle is level, so its body axes are NED's); deliberately not a profile's figures
     wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mass_kg: float = 2.0
-    drag_n_per_mps: float = 0.9
+    drag_n_per_mps: float = 0.75  # x500's identified drag at 2-3 m/s within its ±8 %, linear at every thrust
     rate_noise_rps: float = 0.01
     accel_noise_mps2: float = 0.05
     seed: int = 0

@@ -10,6 +10,9 @@ import pytest
 
 from sitl_fakes.launcher import FakeVehicle
 
+# The vehicles the flight lane flies the helix with: their plans for the wind are made once per session
+PLANNED_VEHICLES = ("x500", "arducopter_sitl")
+
 
 @pytest.fixture
 def fake_vehicle_factory(tmp_path):
@@ -31,6 +34,32 @@ def fake_vehicle_factory(tmp_path):
     yield factory
     for fake in started:
         fake.stop()
+
+
+@pytest.fixture(scope="session")
+def helix_plans_for_wind(tmp_path_factory, worker_id):
+    """The helix mission's plans for the wind (flighttest.planner.wind_plans), made before the first flight
+    in a plan cache the session's workers share (FLIGHTTEST_CACHE, inherited by the flights' processes):
+    a minute of IPOPT per vehicle, once, outside any flight's timeout. Odd workers take the vehicles in the
+    other order, and each loads what the other planned (the cache's lock has it wait for a plan under way)."""
+    from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
+    from flighttest.flying.missions_config import load_mission_config
+    from flighttest.model.profiles import load_profile
+
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if worker_id != "master" else base
+    os.environ["FLIGHTTEST_CACHE"] = str(root / "flighttest-cache")
+    helix = load_mission_module("helix")
+    cfg = load_mission_config(mission_config_path("helix"))
+    odd = worker_id.removeprefix("gw").isdigit() and int(worker_id.removeprefix("gw")) % 2 == 1
+    for name in reversed(PLANNED_VEHICLES) if odd else PLANNED_VEHICLES:
+        helix.plans_for_wind(load_profile(name), cfg)
+
+
+@pytest.fixture(autouse=True)
+def _plans_before_flights(request):
+    if request.node.get_closest_marker("flight") is not None:
+        request.getfixturevalue("helix_plans_for_wind")
 
 
 def pytest_collection_modifyitems(config, items):

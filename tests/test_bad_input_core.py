@@ -76,7 +76,7 @@ BAD_TOML_BYTES = {
     "name_slash": _x500_with(name='"../evil"').encode(),
     "name_ctrl": _x500_with(name='"x\\u0007"').encode(),
     "speed_huge": _x500_with(max_speed_mps="1e308").encode(),
-    "vrs_list": (X500_TOML.split("[vrs]")[0] + "vrs = [1, 2]\n").encode(),
+    "vrs_list": (X500_TOML.split("\n[drag]")[0] + "\nvrs = [1, 2]\n").encode(),
     "wallow_huge": (X500_TOML + "w_allow_mps = 1e308\n").encode(),
 }
 

@@ -39,7 +39,7 @@ def calibration_log(drag: DragModel, wind=(0.6, -1.2, 0.0), noise=0.15, speeds=(
     t = df["t_s"].to_numpy()
     state = pd.DataFrame({"t_s": t, "vn_mps": v[:, 0], "ve_mps": v[:, 1], "vd_mps": v[:, 2], "qw": q[:, 0],
                           "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3], "ax_mps2": fx / m + rng.normal(0, noise, len(t)),
-                          "ay_mps2": fy / m + rng.normal(0, noise, len(t))})  # fmt: skip
+                          "ay_mps2": fy / m + rng.normal(0, noise, len(t)), "az_mps2": -9.80665 + 0 * t})  # fmt: skip
     events = [{"event": "stream_start", "t_s": 0.0}, {"event": "stream_end", "t_s": float(t[-1])}]
     return FlightLog(Path("calibration"), "flighttest-folder", state, events=events)
 

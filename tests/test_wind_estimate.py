@@ -49,11 +49,25 @@ def test_a_drag_model_off_by_its_stated_uncertainty_is_still_covered():
     assert math.hypot(f.wn_mps, f.we_mps - 3.0) < 2.45 * f.sd_mps
 
 
-def test_an_assumed_drag_model_says_it_knows_little():
+def test_an_assumed_drag_model_says_it_knows_little_in_a_hover():
     drag, m = SIH
     assumed = DragModel.isotropic_linear(1.0)  # ±50 %
-    f = fly(drag, m, assumed)
-    assert f.sd_mps > 1.0  # 50 % of a 3 m/s airspeed
+    f = fly(drag, m, assumed, circle_mps=0.0)
+    assert f.sd_mps > 1.0  # 50 % of a 3 m/s airspeed: a steady airspeed cannot tell the wind from the scale
+
+
+def test_changing_air_teaches_it_the_drags_scale():
+    """The vehicle drags 15 % more than a model known to ±15 %: a circle under a steady wind tells the two
+    apart, and the filter finds the scale, the wind, and knows them better than in the hover."""
+    _, m = SIH
+    true = DragModel.isotropic_linear(1.15, 0.0, "truth")
+    known = DragModel.isotropic_linear(1.0, 0.15, "identified")
+    hover = fly(true, m, known, circle_mps=0.0, seconds=15.0)
+    assert hover.scale_error == 0.0  # a steady velocity: nothing to learn it from
+    f = fly(true, m, known, circle_mps=1.5, seconds=15.0)
+    assert f.scale_error == pytest.approx(0.15, abs=0.05) and f.scale_sd < 0.1
+    err = math.hypot(f.wn_mps, f.we_mps - 3.0)
+    assert err < 0.3 and err < 2.45 * f.sd_mps and f.sd_mps < 0.5 * hover.sd_mps
 
 
 def test_nothing_known_before_the_first_sample():

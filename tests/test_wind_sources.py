@@ -6,9 +6,9 @@ with its own source; otherwise flighttest's estimator over the log's own IMU, at
 exposure is air-relative with it, beside the worst air within its uncertainty; ``identify`` says the wind
 its probe was flown in, and refuses one flown in more wind than it can correct for.
 
-The synthetic vehicle's IMU feels a linear drag of 0.5 /s (x500: 1 N per m/s on 2 kg), level, so the
-estimator with x500's assumed (±50 %) drag model finds the wind it flew in, and says it knows it to ±50 %
-of the airspeed."""
+The synthetic vehicle's IMU feels a linear drag of 0.5 /s (1 N per m/s on x500's 2 kg), level; these tests
+fly it as an x500 whose drag is that, measured to ±5 %, from a user profile folder, so the estimator finds the
+wind it flew in and says it knows it to about 5 % of the airspeed."""
 
 from __future__ import annotations
 
@@ -48,6 +48,22 @@ from synthetic import (
     write_tlog,
     write_ulog,
 )
+
+
+@pytest.fixture(autouse=True)
+def x500_with_the_synthetic_drag(tmp_path_factory, monkeypatch):
+    """The shipped x500 with its [drag] replaced by the synthetic IMU's, measured to ±5 % (user folders shadow
+    shipped profiles, as an operator's would)."""
+    d = tmp_path_factory.mktemp("vehicles")
+    text = (SHIPPED_DIR / "x500.toml").read_text()
+    head, rest = text.split("\n[drag]", 1)
+    tail = rest[rest.index("[vrs]"):]
+    head = "\n".join(ln for ln in head.splitlines() if not ln.startswith("drag_n_per_mps"))
+    drag = 'linear_n_per_mps = 1.0\nrel_sd = 0.05\nsource = "the synthetic IMU\'s"\n'
+    (d / "x500.toml").write_text(f"{head}\ndrag_n_per_mps = 1.0\n\n[drag]\n{drag}\n{tail}")
+    monkeypatch.setenv("FLIGHTTEST_VEHICLES", str(d))
+    assert load_profile("x500").drag.rel_sd == 0.05
+
 
 EAST3 = (0.0, 3.0, 0.0)  # the air moves east at 3 m/s, as in ../shared/wind_sitl
 FAST = IdentifyConfig(n_boot=3)
@@ -89,8 +105,8 @@ def test_a_wind_cov_of_exact_zeros_is_no_estimate_and_flighttest_estimates_the_w
     s = a.summary()
     assert s["wind_source"] == "flighttest estimate" and "HIGHRES_IMU" in s["wind_detail"]
     assert _wind_error(a, EAST3) < 0.1
-    # x500's drag is assumed (±50 %): 3 m/s of air known to about half of it, and the summary says so
-    assert 1.2 < s["wind_sd_mps"] < 2.0
+    # the drag is known to ±5 %: 3 m/s of air known to about 5 % of it, and the summary says so
+    assert 0.1 < s["wind_sd_mps"] < 0.4
     assert "wind" not in a.log.missing and any("exact zeros" in n for n in a.notes)
 
 
@@ -197,13 +213,13 @@ def test_an_older_folder_that_logged_a_wind_has_it_of_unknown_source(tmp_path):
 
 
 def test_the_drag_model_a_folder_recorded_goes_first_unless_a_vehicle_is_given(tmp_path):
-    # meta.json's vehicle summary says the drag was measured (±5 %); the shipped x500 assumes it (±50 %)
-    measured = {"name": "x500", "mass_kg": 2.0, "drag": DragModel.isotropic_linear(1.0, 0.05, "measured").to_table()}
+    # meta.json's vehicle summary says the drag was known to ±1 % when it flew; the x500 now says ±5 %
+    measured = {"name": "x500", "mass_kg": 2.0, "drag": DragModel.isotropic_linear(1.0, 0.01, "measured").to_table()}
     d = _folder(tmp_path / "f", hover_flight(wind_reported=False), None, measured)
     own = analyse(load_log(d)).summary()
     given = analyse(load_log(d), "x500").summary()
-    assert "meta.json" in own["wind_detail"] and own["wind_sd_mps"] < 0.3
-    assert "profile x500" in given["wind_detail"] and given["wind_sd_mps"] > 1.0
+    assert "meta.json" in own["wind_detail"] and "profile x500" in given["wind_detail"]
+    assert own["wind_sd_mps"] < given["wind_sd_mps"]
 
 
 # -- exposure in the air ---------------------------------------------------------------------------
@@ -248,7 +264,40 @@ def test_the_smoothed_estimate_states_the_filters_own_uncertainty():
     q = tuple(quat_from_euler(0.1, -0.05, 0.7))
     f.update(0.0, (1.0, -2.0, 0.3), q, (0.2, -0.4))
     v, qq, w = np.array([[1.0, -2.0, 0.3]]), np.array([q]), np.array([[f.wn_mps, f.we_mps, 0.0]])
-    assert wind_mod._model_sd(drag, 3.0, v, qq, w, f.accel_bias_mps2)[0] == pytest.approx(f.model_sd_mps, rel=1e-9)
+    got = wind_mod._model_sd(drag, 3.0, v, qq, w, f.accel_bias_mps2)[0]
+    assert got == pytest.approx(f.model_sd_mps, rel=1e-9)
+
+
+def _level_samples(f: WindFilter, t0: float, t1: float, v_ned, wind, rate_hz: float = 50.0) -> None:
+    """Level flight at ``v_ned`` in ``wind``: the IMU feels the filter's own drag model of the true airspeed,
+    times 1.1 (a drag 10 % above the model)."""
+    q = (1.0, 0.0, 0.0, 0.0)
+    for t in np.arange(t0, t1, 1.0 / rate_hz):
+        fx, fy = f.drag.force_n(v_ned[0] - wind[0], v_ned[1] - wind[1])
+        f.update(float(t), (*v_ned, 0.0), q, (1.1 * fx / f.mass_kg, 1.1 * fy / f.mass_kg, -G))
+
+
+G = 9.80665
+
+
+def test_the_drags_scale_error_is_a_state_of_the_filter():
+    """A drag 10 % stronger than the model: in a 3 m/s hover the wind and the scale cannot be told apart, the
+    estimate is off by about 10 % of the airspeed and within what the filter says; a fast leg then (4.5 m/s
+    north, as a helix's) tells them apart: the estimate comes closer to the truth instead of taking the leg's
+    10 % of 5.4 m/s of air, the scale error is found, and the sd does not grow by rel_sd × the leg's air."""
+    drag = DragModel((0.56, 0.58), (0.06, 0.04), 0.08, "identified")
+    f = WindFilter(drag, 2.0)
+    wind = (0.0, 3.0)
+    _level_samples(f, 0.0, 10.0, (0.0, 0.0), wind)
+    err_hover = math.hypot(f.wn_mps - wind[0], f.we_mps - wind[1])
+    assert 0.1 < err_hover < 0.45  # the scale error the hover cannot see
+    assert 2.45 * f.sd_mps >= err_hover  # within what it says
+    sd_hover = f.sd_mps
+    _level_samples(f, 10.0, 16.0, (4.5, 0.0), wind)  # 4.5 m/s north: 5.4 m/s of air
+    err_leg = math.hypot(f.wn_mps - wind[0], f.we_mps - wind[1])
+    assert err_leg < err_hover and 2.45 * f.sd_mps >= err_leg
+    assert f.scale_error == pytest.approx(0.1, abs=0.03) and f.scale_sd < 0.04
+    assert f.sd_mps <= sd_hover
 
 
 # -- the report, compare and the campaign say it -----------------------------------------------------

@@ -68,7 +68,7 @@ def calibration_samples(log: FlightLog) -> dict[str, np.ndarray]:
         sel &= t >= float(start["t_s"])
     if end is not None and isinstance(end.get("t_s"), int | float):
         sel &= t <= float(end["t_s"])
-    cols = ["vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "ax_mps2", "ay_mps2"]
+    cols = ["vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "ax_mps2", "ay_mps2", "az_mps2"]
     data = {c: st[c].to_numpy(float)[sel] for c in cols if c in st}
     if len(data) < len(cols):
         raise NoDrag(f"{log.path}: the log has no body specific force (IMU) or attitude: nothing to identify")
@@ -78,9 +78,10 @@ def calibration_samples(log: FlightLog) -> dict[str, np.ndarray]:
     return out
 
 
-def _coefficients(b: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(linear, quadratic) ≥ 0 minimising |f − (−(l·b + q·|b|·b))|² along one axis, and the residuals."""
-    cols = np.column_stack([-b, -np.abs(b) * b])
+def _coefficients(b: np.ndarray, f: np.ndarray, scale: np.ndarray | float = 1.0
+                  ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(linear, quadratic) ≥ 0 minimising |f − (−(l·scale·b + q·|b|·b))|² along one axis, and the residuals."""
+    cols = np.column_stack([-scale * b, -np.abs(b) * b])
     best = None
     for use in ((0, 1), (0,), (1,)):  # the unconstrained fit first; a negative term is dropped
         coef = np.zeros(2)
@@ -98,16 +99,19 @@ def _coefficients(b: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return best
 
 
-def _fit(s: dict[str, np.ndarray], idx: np.ndarray, mass_kg: float, x0: np.ndarray | None = None) -> np.ndarray:
+def _fit(s: dict[str, np.ndarray], idx: np.ndarray, mass_kg: float, x0: np.ndarray | None = None,
+         exponent: float = 0.0) -> np.ndarray:  # fmt: skip
     """(lx, ly, qx, qy, wn, we) minimising the specific-force residuals of the samples ``idx``: for a given
-    wind the coefficients are a linear least-squares fit, so Gauss-Newton searches the wind alone."""
+    wind the coefficients are a linear least-squares fit, so Gauss-Newton searches the wind alone. The linear
+    term grows with (thrust / hover thrust)^``exponent`` (``flighttest.model.drag``)."""
     vn, ve, vd = (s[k][idx] for k in ("vn_mps", "ve_mps", "vd_mps"))
     q = tuple(s[k][idx] for k in ("qw", "qx", "qy", "qz"))
     fx, fy = s["ax_mps2"][idx] * mass_kg, s["ay_mps2"][idx] * mass_kg
+    scale = np.clip(np.abs(s["az_mps2"][idx]) / G_MPS2, 0.1, 3.0) ** exponent
 
     def solve(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         bx, by, _ = ned_to_body(vn - w[0], ve - w[1], vd, *q)
-        (cx, rx), (cy, ry) = _coefficients(bx, fx), _coefficients(by, fy)
+        (cx, rx), (cy, ry) = _coefficients(bx, fx, scale), _coefficients(by, fy, scale)
         return np.array([cx[0], cy[0], cx[1], cy[1]]), np.concatenate([rx, ry])
 
     w = np.zeros(2) if x0 is None else np.asarray(x0[4:6], float).copy()
@@ -142,15 +146,18 @@ def identify_drag(log: FlightLog, profile: VehicleProfile, source: str = "") -> 
         raise NoDrag(f"{log.path}: {n} samples in the calibration's stream (at least {MIN_SAMPLES}): "
                      "fly `flighttest fly drag`")
     m = profile.mass_kg
+    # the thrust dependence is physics, not what level legs at hover thrust can tell: the profile's
+    exponent = profile.drag.linear_thrust_exponent if profile.drag is not None else 0.0
     all_idx = np.arange(n)
-    th = _fit(s, all_idx, m)
-    model = DragModel((th[0], th[1]), (th[2], th[3]), 0.0, "fit")
+    th = _fit(s, all_idx, m, exponent=exponent)
+    thrust = np.abs(s["az_mps2"]) / G_MPS2
+    model = DragModel((th[0], th[1]), (th[2], th[3]), 0.0, "fit", linear_thrust_exponent=exponent)
     bx, by, _ = ned_to_body(s["vn_mps"] - th[4], s["ve_mps"] - th[5], s["vd_mps"], s["qw"], s["qx"], s["qy"], s["qz"])
     air = np.hypot(bx, by)
     if np.percentile(air, 95) - np.percentile(air, 5) < MIN_SPEED_SPREAD_MPS:
         raise NoDrag(f"{log.path}: the airspeed spans {np.percentile(air, 95) - np.percentile(air, 5):.2f} m/s "
                      f"(at least {MIN_SPEED_SPREAD_MPS:g}): fly legs at more than one speed")  # fmt: skip
-    fx, fy = model.force_n(bx, by)
+    fx, fy = model.force_n(bx, by, thrust)
     resid = np.concatenate([fx / m - s["ax_mps2"], fy / m - s["ay_mps2"]])
     # block bootstrap: resample BLOCK_S blocks of the flight with replacement
     rng = np.random.default_rng(0)
@@ -160,7 +167,7 @@ def identify_drag(log: FlightLog, profile: VehicleProfile, source: str = "") -> 
     reps = []
     for _ in range(BOOTSTRAP):
         pick = rng.integers(0, len(by_block), len(by_block))
-        reps.append(_fit(s, np.concatenate([by_block[k] for k in pick]), m, th))
+        reps.append(_fit(s, np.concatenate([by_block[k] for k in pick]), m, th, exponent))
     reps = np.array(reps)
     v_top = float(np.percentile(air, 95))
     speeds = np.linspace(0.5, max(v_top, 0.6), 12)
@@ -186,7 +193,7 @@ def identify_drag(log: FlightLog, profile: VehicleProfile, source: str = "") -> 
     model = DragModel((float(th[0]), float(th[1])), (float(th[2]), float(th[3])), round(rel_sd, 4),
                       f"identified from {where} (flighttest identify --drag)",
                       {"calibration_wind_ned_mps": [round(float(th[4]), 3), round(float(th[5]), 3), 0.0],
-                       "airspeed_max_mps": round(v_top, 3), "samples": n})  # fmt: skip
+                       "airspeed_max_mps": round(v_top, 3), "samples": n}, exponent)  # fmt: skip
     boot = {"replicates": BOOTSTRAP, "block_s": BLOCK_S,
             "linear_sd_n_per_mps": [float(np.std(reps[:, 0])), float(np.std(reps[:, 1]))],
             "quadratic_sd_n_per_mps2": [float(np.std(reps[:, 2])), float(np.std(reps[:, 3]))]}  # fmt: skip

@@ -24,9 +24,9 @@ first of, per log:
    (``VehicleProfile.drag``). Post-flight the whole log is known, so a forward and a backward pass are
    combined (a two-filter smoother: the backward filter's prediction, before it takes the sample, fused
    with the forward filter's estimate), at ``ESTIMATE_RATE_HZ`` with the specific force averaged over
-   each step. Its 1 σ is the filter's own, combined with what averaging cannot remove (the drag model's
-   relative error on the airspeed, an accelerometer bias through the drag's slope: the filter's
-   ``model_sd_mps``, evaluated on the smoothed estimate).
+   each step. Its 1 σ is the smoother's own (the drag's scale error a state of both passes, its prior
+   counted once), combined with what no state covers (an accelerometer bias through the drag's slope: the
+   filter's ``model_sd``, on the smoothed estimate).
 4. **assumed calm** (``"assumed calm"``): still air, its uncertainty unknown (``wind_sd_mps`` NaN: no
    worst case can be judged), and ``FlightLog.missing["wind"]`` says why.
 
@@ -48,7 +48,7 @@ from flighttest.analysis.schema import FlightLog, resample
 from flighttest.flying.wind import REPORT_SD_UNKNOWN_MPS, WIND_COVERAGE_SIGMAS
 from flighttest.model.drag import DragModel
 from flighttest.model.frames import ned_to_body
-from flighttest.model.wind_estimate import WindFilter
+from flighttest.model.wind_estimate import WindFilter, model_sd, worse_axis_sd
 
 ESTIMATE_RATE_HZ = 5.0  # the estimator's steps: the specific force averaged over each 0.2 s (bench/RESULTS.md)
 MIN_AIRBORNE_S = 2.0  # less time in the air than this: nothing to estimate from
@@ -204,19 +204,17 @@ def _reported(log: FlightLog) -> tuple[LogWind | None, list[str]]:
 # -- 3. flighttest's estimator ---------------------------------------------------------------------
 def _model_sd(drag: DragModel, mass_kg: float, v: np.ndarray, q: np.ndarray, wind: np.ndarray,
               bias_mps2: float) -> np.ndarray:  # fmt: skip
-    """``WindFilter.model_sd_mps`` at every step, vectorised: the drag model's relative error on the
-    horizontal airspeed, and an accelerometer bias seen through the drag's weaker slope."""
+    """``WindFilter.model_sd_mps`` at every step, vectorised: an accelerometer bias seen through the drag's
+    weaker slope (and an assumed drag's error on the airspeed)."""
     air = v - wind
     bx, by, _ = ned_to_body(air[:, 0], air[:, 1], air[:, 2], q[:, 0], q[:, 1], q[:, 2], q[:, 3])
     sx, sy = drag.slope_n_per_mps(bx, by)
-    slope = np.minimum(sx, sy) / mass_kg
-    bias = np.where(slope > 0, bias_mps2 / np.where(slope > 0, slope, 1.0), np.inf)
-    return np.hypot(drag.rel_sd * np.hypot(air[:, 0], air[:, 1]), bias)
+    return model_sd(drag, np.hypot(air[:, 0], air[:, 1]), bias_mps2, np.minimum(sx, sy) / mass_kg)
 
 
 def _steps(state: pd.DataFrame, use: np.ndarray, rate_hz: float) -> pd.DataFrame:
     """The airborne samples averaged over steps of 1/rate_hz: time, velocity, attitude, specific force."""
-    cols = ["t_s", "vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "ax_mps2", "ay_mps2"]
+    cols = ["t_s", "vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "ax_mps2", "ay_mps2", "az_mps2"]
     s = state.loc[use, cols]
     step = np.floor(s["t_s"].to_numpy(float) * rate_hz).astype(np.int64)
     m = s.groupby(step, sort=True).mean()
@@ -226,13 +224,14 @@ def _steps(state: pd.DataFrame, use: np.ndarray, rate_hz: float) -> pd.DataFrame
 
 
 def _run(f: WindFilter, steps: pd.DataFrame, order: np.ndarray, sign: float, before: bool) -> np.ndarray:
-    """Run ``f`` over ``steps`` in ``order`` (time × ``sign``); per step (wn, we, pnn, pne, pee), taken
-    before the step's update (``before``: the backward pass's prediction) or after it."""
+    """Run ``f`` over ``steps`` in ``order`` (time × ``sign``); per step the state (wn, we, ε) and its 3×3
+    covariance flattened (9), taken before the step's update (``before``: the backward pass's prediction) or
+    after it."""
     # plain Python floats: indexing numpy arrays element by element costs as much as the filter itself
     t = (steps["t_s"].to_numpy(float) * sign).tolist()
     v = list(map(tuple, steps[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(float).tolist()))
     q = list(map(tuple, steps[["qw", "qx", "qy", "qz"]].to_numpy(float).tolist()))
-    a = list(map(tuple, steps[["ax_mps2", "ay_mps2"]].to_numpy(float).tolist()))
+    a = list(map(tuple, steps[["ax_mps2", "ay_mps2", "az_mps2"]].to_numpy(float).tolist()))
     out = [None] * len(t)
     walk = f.process_sd_mps**2
     for k in order.tolist():
@@ -240,33 +239,42 @@ def _run(f: WindFilter, steps: pd.DataFrame, order: np.ndarray, sign: float, bef
             # adaptation measures the time between updates)
             grow = walk * max(t[k] - f.t_s, 0.0) if f.t_s is not None else 0.0
             p = f.p
-            out[k] = (f.wn_mps, f.we_mps, p[0] + grow, p[1], p[2] + grow)
+            out[k] = (f.wn_mps, f.we_mps, f.scale_error, p[0][0] + grow, p[0][1], p[0][2], p[1][0],
+                      p[1][1] + grow, p[1][2], *p[2])  # fmt: skip
             f.update(t[k], v[k], q[k], a[k])
         else:
             f.update(t[k], v[k], q[k], a[k])
-            out[k] = (f.wn_mps, f.we_mps, *f.p)
+            out[k] = (f.wn_mps, f.we_mps, f.scale_error, *f.p[0], *f.p[1], *f.p[2])
     return np.asarray(out, float)
 
 
-def _fuse(fw: np.ndarray, bw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two Gaussian estimates (rows: wn, we, pnn, pne, pee) fused by their information: the means (n, 2)
-    and the worse axis's 1 σ (n,)."""
+def _without_scale(x: np.ndarray) -> np.ndarray:
+    """A pass whose scale is held (variance 0) with the scale given unit variance and no correlation: fused
+    with another such pass and their unit prior once, the wind fuses as a two-state filter's would."""
+    y = x.copy()
+    y[:, 2] = 0.0
+    y[:, [5, 8, 9, 10]] = 0.0  # P02, P12, P20, P21 of the flattened 3×3 after the state's 3
+    y[:, 11] = 1.0  # P22
+    return y
 
-    def inv(p):
-        det = p[:, 0] * p[:, 2] - p[:, 1] ** 2
-        det = np.where(det > 0, det, np.nan)
-        return np.column_stack([p[:, 2] / det, -p[:, 1] / det, p[:, 0] / det])
 
-    i_f, i_b = inv(fw[:, 2:]), inv(bw[:, 2:])
-    i_f, i_b = np.nan_to_num(i_f), np.nan_to_num(i_b)
-    info = i_f + i_b
-    cov = inv(info)
-    rhs_n = i_f[:, 0] * fw[:, 0] + i_f[:, 1] * fw[:, 1] + i_b[:, 0] * bw[:, 0] + i_b[:, 1] * bw[:, 1]
-    rhs_e = i_f[:, 1] * fw[:, 0] + i_f[:, 2] * fw[:, 1] + i_b[:, 1] * bw[:, 0] + i_b[:, 2] * bw[:, 1]
-    mean = np.column_stack([cov[:, 0] * rhs_n + cov[:, 1] * rhs_e, cov[:, 1] * rhs_n + cov[:, 2] * rhs_e])
-    half = 0.5 * (cov[:, 0] + cov[:, 2])
-    worse = np.sqrt(np.maximum(half + np.sqrt(np.maximum(0.25 * (cov[:, 0] - cov[:, 2]) ** 2 + cov[:, 1] ** 2, 0)), 0))
-    return mean, worse
+def _fuse(fw: np.ndarray, bw: np.ndarray, prior_info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two Gaussian estimates of (wn, we, ε) (rows: the state, its covariance flattened) fused by their
+    information, the prior both started from counted once: the wind's means (n, 2) and its worse axis's
+    1 σ (n,). A step whose fused information is not positive definite keeps the forward pass's."""
+    pf, pb = fw[:, 3:].reshape(-1, 3, 3), bw[:, 3:].reshape(-1, 3, 3)
+    ok = (np.linalg.det(pf) > 0) & (np.linalg.det(pb) > 0)
+    eye = np.eye(3)
+    i_f = np.linalg.inv(np.where(ok[:, None, None], pf, eye))
+    i_b = np.linalg.inv(np.where(ok[:, None, None], pb, eye))
+    info = i_f + i_b - prior_info
+    ok &= np.linalg.eigvalsh(0.5 * (info + np.transpose(info, (0, 2, 1))))[:, 0] > 0
+    cov = np.linalg.inv(np.where(ok[:, None, None], info, eye))
+    rhs = np.einsum("nij,nj->ni", i_f, fw[:, :3]) + np.einsum("nij,nj->ni", i_b, bw[:, :3])
+    mean = np.einsum("nij,nj->ni", cov, rhs)
+    mean = np.where(ok[:, None], mean, fw[:, :3])
+    cov = np.where(ok[:, None, None], cov, pf)
+    return mean[:, :2], worse_axis_sd(cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1])
 
 
 def estimate(state: pd.DataFrame, drag: DragModel, mass_kg: float, airborne: np.ndarray,
@@ -281,7 +289,13 @@ def estimate(state: pd.DataFrame, drag: DragModel, mass_kg: float, airborne: np.
     n = len(steps)
     fw = _run(WindFilter(drag, mass_kg), steps, np.arange(n), 1.0, before=False)
     bw = _run(WindFilter(drag, mass_kg), steps, np.arange(n)[::-1], -1.0, before=True)
-    mean, filt_sd = _fuse(fw, bw)
+    # the common prior both passes start from is the scale's (the wind's own wanders off within seconds); a
+    # scale held at 0 (variance 0) is the same in both and fused as known
+    scale_var = WindFilter(drag, mass_kg).p[2][2]
+    if scale_var > 0:
+        mean, filt_sd = _fuse(fw, bw, np.diag([0.0, 0.0, 1.0 / scale_var]))
+    else:
+        mean, filt_sd = _fuse(_without_scale(fw), _without_scale(bw), np.diag([0.0, 0.0, 1.0]))
     v = steps[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(float)
     q = steps[["qw", "qx", "qy", "qz"]].to_numpy(float)
     wind3 = np.column_stack([mean, np.zeros(n)])

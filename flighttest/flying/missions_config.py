@@ -204,6 +204,7 @@ _PLAN: dict[str, dict[str, Range | str]] = {
         "thrust_rate_max_mps3": Range(0.0, 1000.0, "m/s³", lo_open=True),
         "wind_step_mps": Range(0.0, 30.0, "m/s"),
         "wind_radius_mps": Range(0.0, 10.0, "m/s"),
+        "calm_wind_radius_mps": Range(0.0, 10.0, "m/s"),
     },
     "drag": {
         "speed_min_mps": Range(0.2, 10.0, "m/s"),

@@ -81,9 +81,14 @@ class HelixPlanConfig:
     n_coarse: int = 30
     trajectory: str | None = None  # a planned file (NAME.csv + NAME.json beside the config), flown instead
     # helices planned ahead for winds up to [flight] max_wind_mps in these steps (0: none, calm only), each
-    # clear of the guard region for any wind within wind_radius_mps of its own (flighttest.planner.wind_plans)
-    wind_step_mps: float = 2.0
+    # clear of the guard region for any wind within wind_radius_mps of its own (flighttest.planner.wind_plans):
+    # half a step; the start hover judges each at the wind it measures, with its uncertainty. A radius of 1.25
+    # (half a step + 2.45 σ of 0.3 m/s) did not converge for arducopter_sitl (bench/RESULTS.md, "Plans for the wind")
+    wind_step_mps: float = 1.0
     wind_radius_mps: float = 0.5
+    # the calm plan keeps clear for any wind within this of calm: the guard's radius in still air (2.45 σ of
+    # its estimate, 0.45 m/s on the x500: an accelerometer bias of 0.05 m/s² over its drag reads as 0.18 m/s)
+    calm_wind_radius_mps: float = 0.5
 
     @classmethod
     def from_table(cls, plan: dict[str, Any]) -> HelixPlanConfig:

@@ -111,8 +111,7 @@ class WindSources:
         if drag is not None:
             estimator = WindFilter(drag, mass_kg)
             if prior is not None:  # the filter starts from the operator's wind, so the prior counts once
-                estimator.wn_mps, estimator.we_mps = prior.ned_mps[0], prior.ned_mps[1]
-                estimator.p = [prior.sd_mps**2, 0.0, prior.sd_mps**2]
+                estimator.seed(prior.ned_mps[0], prior.ned_mps[1], prior.sd_mps)
         return cls(prior, estimator)
 
     def on_imu(self, t_s: float, st: FlightState) -> None:
@@ -123,7 +122,7 @@ class WindSources:
             return
         if t_s - st.t_posvel > FRESH_STATE_S or t_s - st.t_att > FRESH_STATE_S:
             return
-        f.update(t_s, (st.vn_mps, st.ve_mps, st.vd_mps), st.q, st.accel_frd_mps2[:2])
+        f.update(t_s, (st.vn_mps, st.ve_mps, st.vd_mps), st.q, st.accel_frd_mps2)
 
     def own(self, now_s: float) -> WindEstimate | None:
         """flighttest's estimate, its uncertainty grown by the time since its last sample."""

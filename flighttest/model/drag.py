@@ -9,6 +9,11 @@ model at speed). Thrust acts along −z_body only, so the specific force the IMU
 
 ``rel_sd`` is the model's 1 σ relative uncertainty in that force over the airspeeds flown: an assumed
 model is ±50 %, one identified from a calibration flight says its own (``flighttest.analysis.drag``).
+
+A rotor's momentum drag grows with the square root of its thrust (momentum theory: the air it turns grows
+so), which a descent moves far from hover; ``linear_thrust_exponent`` 0.5 scales the linear term with
+(thrust / hover thrust)^0.5, the thrust read off the IMU's own specific force along z. PX4 SIH's drag does
+not depend on thrust (exponent 0).
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ class DragModel:
     rel_sd: float = ASSUMED_REL_SD
     source: str = "assumed"
     details: dict[str, Any] = field(default_factory=dict, compare=False)  # an identification's own figures
+    linear_thrust_exponent: float = 0.0
 
     def __post_init__(self) -> None:
         values = (*self.linear_n_per_mps, *self.quadratic_n_per_mps2, self.rel_sd)
@@ -43,15 +49,24 @@ class DragModel:
     def isotropic_linear(cls, n_per_mps: float, rel_sd: float = ASSUMED_REL_SD, source: str = "assumed") -> DragModel:
         return cls((n_per_mps, n_per_mps), (0.0, 0.0), rel_sd, source)
 
-    def force_n(self, vx_mps, vy_mps):
-        """Drag force along body x and y (N) for air-relative body velocity (m/s); numpy-vectorised."""
-        (lx, ly), (qx, qy) = self.linear_n_per_mps, self.quadratic_n_per_mps2
-        return -(lx * vx_mps + qx * np.abs(vx_mps) * vx_mps), -(ly * vy_mps + qy * np.abs(vy_mps) * vy_mps)
+    def thrust_scale(self, thrust_ratio=1.0):
+        """The linear term's factor at ``thrust_ratio`` = thrust / hover thrust (clipped to 0.1..3)."""
+        if not self.linear_thrust_exponent:
+            return 1.0
+        return np.clip(thrust_ratio, 0.1, 3.0) ** self.linear_thrust_exponent
 
-    def slope_n_per_mps(self, vx_mps, vy_mps):
-        """How fast the drag grows with airspeed along x and y (N per m/s, > 0): −dF/dv."""
+    def force_n(self, vx_mps, vy_mps, thrust_ratio=1.0):
+        """Drag force along body x and y (N) for air-relative body velocity (m/s); numpy-vectorised."""
+        k = self.thrust_scale(thrust_ratio)
         (lx, ly), (qx, qy) = self.linear_n_per_mps, self.quadratic_n_per_mps2
-        return lx + 2.0 * qx * np.abs(vx_mps), ly + 2.0 * qy * np.abs(vy_mps)
+        return (-(k * lx * vx_mps + qx * np.abs(vx_mps) * vx_mps),
+                -(k * ly * vy_mps + qy * np.abs(vy_mps) * vy_mps))  # fmt: skip
+
+    def slope_n_per_mps(self, vx_mps, vy_mps, thrust_ratio=1.0):
+        """How fast the drag grows with airspeed along x and y (N per m/s, > 0): −dF/dv."""
+        k = self.thrust_scale(thrust_ratio)
+        (lx, ly), (qx, qy) = self.linear_n_per_mps, self.quadratic_n_per_mps2
+        return k * lx + 2.0 * qx * np.abs(vx_mps), k * ly + 2.0 * qy * np.abs(vy_mps)
 
     def mean_linear_n_per_mps(self, airspeed_mps: float = 2.0) -> float:
         """One linear coefficient for what needs one (the feed-forward): the secant at ``airspeed_mps``."""
@@ -61,7 +76,8 @@ class DragModel:
     def to_table(self) -> dict[str, Any]:
         return {"linear_n_per_mps": list(self.linear_n_per_mps),
                 "quadratic_n_per_mps2": list(self.quadratic_n_per_mps2), "rel_sd": self.rel_sd,
-                "source": self.source, **({"details": self.details} if self.details else {})}  # fmt: skip
+                "linear_thrust_exponent": self.linear_thrust_exponent, "source": self.source,
+                **({"details": self.details} if self.details else {})}  # fmt: skip
 
     @classmethod
     def from_table(cls, t: dict[str, Any]) -> DragModel:
@@ -77,7 +93,8 @@ class DragModel:
                 raise ValueError(f"[drag] {key} must be a number or two (body x, y)")
             return float(v[0]), float(v[1])
 
-        unknown = set(t) - {"linear_n_per_mps", "quadratic_n_per_mps2", "rel_sd", "source", "details"}
+        unknown = set(t) - {"linear_n_per_mps", "quadratic_n_per_mps2", "rel_sd", "source", "details",
+                            "linear_thrust_exponent"}
         if unknown:
             raise ValueError(f"[drag] has unknown keys: {', '.join(sorted(unknown))}")
         rel = t.get("rel_sd", ASSUMED_REL_SD)
@@ -85,5 +102,8 @@ class DragModel:
             raise ValueError("[drag] rel_sd must be a number")
         source = t.get("source", "assumed")
         details = t.get("details", {})
+        exponent = t.get("linear_thrust_exponent", 0.0)
+        if isinstance(exponent, bool) or not isinstance(exponent, int | float) or not 0 <= exponent <= 1:
+            raise ValueError("[drag] linear_thrust_exponent must be a number from 0 to 1")
         return cls(pair("linear_n_per_mps", None), pair("quadratic_n_per_mps2", (0.0, 0.0)), float(rel),
-                   str(source), details if isinstance(details, dict) else {})  # fmt: skip
+                   str(source), details if isinstance(details, dict) else {}, float(exponent))  # fmt: skip

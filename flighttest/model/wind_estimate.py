@@ -3,16 +3,25 @@ attitude and velocity, with the airframe's drag model (``flighttest.model.drag``
 and ArduPilot's drag fusion: across the thrust axis the IMU feels only the air's drag, and the drag
 says the air-relative velocity, so ``wind = v_ned − R·v_air``.
 
-A two-state extended Kalman filter ``(wn, we)`` (the vertical wind is taken as zero): the wind wanders
-as a random walk (``process_sd``), each sample's measurement is the body-frame specific force along x
-and y against ``drag(Rᵀ(v − wind)) / m``. Its measurement noise adapts to the innovations it sees
-(vibration differs by airframe by an order of magnitude), never below ``accel_sd_mps2``. The same class
-runs live (``flighttest.flying.wind``) and over a log (``flighttest.analysis.wind``): one definition.
+A three-state extended Kalman filter ``(wn, we, ε)``: the horizontal wind (the vertical wind is taken as
+zero), which wanders as a random walk (``process_sd``), and the drag's scale error ε — the vehicle drags
+(1 + ε) times its model, ε known to ``drag.rel_sd`` beforehand and constant. (Only a drag known to
+``SCALE_STATE_MAX_REL_SD``: at ±50 % the product ε·wind the linearisation drops is as large as what it keeps,
+and the filter ran 2.7 m/s off in a hover while saying 1 m/s; an assumed drag's scale stays out of the state
+and its share of ``sd_mps`` is ``rel_sd`` times the airspeed.) Each sample's measurement is
+the body-frame specific force along x and y against ``(1 + ε)·drag(Rᵀ(v − wind)) / m``. A drag model wrong
+by a factor moves every sample the same way, which no averaging removes: as a state, the filter learns ε
+where the airspeed changes under a steady wind (a helix turns it through every direction) and otherwise
+carries its uncertainty into the wind's, so a fast leg flown on a wind found in the hover neither trusts
+its own samples more than the model allows nor throws the hover's estimate away. Its measurement noise
+adapts to the innovations it sees (vibration differs by airframe by an order of magnitude), never below
+``accel_sd_mps2``. The same class runs live (``flighttest.flying.wind``) and over a log
+(``flighttest.analysis.wind``): one definition.
 
-``sd_mps`` is honest about what the filter cannot see: its own covariance, plus what a drag model
-wrong by ``drag.rel_sd`` and an accelerometer bias of ``accel_bias_mps2`` do to the airspeed it infers
-— an error that no amount of averaging removes. A vehicle whose drag is small (ArduCopter SITL's quad
-leans 1.2° in 3 m/s: ../shared/wind_sitl) senses the wind poorly, and says so.
+``sd_mps`` is honest about what the filter cannot see: its own covariance (the scale error's share
+included), plus what an accelerometer bias of ``accel_bias_mps2`` does to the airspeed it infers. A vehicle
+whose drag is small (ArduCopter SITL's quad leans 1.2° in 3 m/s: ../shared/wind_sitl) senses the wind
+poorly, and says so.
 """
 
 from __future__ import annotations
@@ -20,14 +29,56 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from flighttest.model.aero import G_MPS2
 from flighttest.model.drag import DragModel
 from flighttest.model.frames import ned_to_body
 
 ACCEL_SD_MPS2 = 0.05  # the least noise a sample's specific force is credited with
 ACCEL_BIAS_MPS2 = 0.05  # an accelerometer's residual bias after calibration
-PROCESS_SD_MPS = 0.3  # the wind's wander per √s (gusts are the guard's margin, not the filter's)
+# the wind's wander per √s: PX4's EKF2_WIND_NSD is 0.05, ArduPilot's EK3_WIND_P_NSE 0.2. At 0.3 the estimate
+# on the fake in still air wandered ±0.25 m/s with its 1 σ at 0.2, and a helix's ε·airspeed passed for wind
+# (bench/RESULTS.md, "The wind filter's scale state"); gusts faster than this are the guard's margin
+PROCESS_SD_MPS = 0.1
 INITIAL_SD_MPS = 5.0  # before the first sample: nothing known
 NOISE_TAU_S = 2.0  # the innovation variance's memory
+# a sample's noise until the innovations have shown it (a multicopter's IMU at hover: 0.05-0.5 m/s²); from
+# zero, the first seconds trusted each sample to 0.05 m/s² and ran 2 m/s off in 0.1 s (tests/test_wind_estimate.py)
+NOISE_INITIAL_MPS2 = 0.3
+SCALE_MIN = -0.9  # ε is kept above: a drag of a tenth of the model's is another vehicle
+SCALE_STATE_MAX_REL_SD = 0.2
+# ε is only considered (its uncertainty carried, its value kept: a Schmidt filter) for this long after the
+# first sample — from an unknown wind the first updates overshoot, and the linearisation traded wind for scale
+# along the hover's unseen direction (a 10 % scale error read as −15 % and 0.7 m/s of wind) — and while the
+# velocity differs from its recent mean by less than this: in a steady wind a steady velocity cannot tell
+# wind from scale, and the linearised filter drifted along what it cannot see (3.0 → 4.2 m/s in 15 s of hover
+# and landing in a virtual flight: tests/test_runner_safety.py)
+SCALE_LEARN_AFTER_S = 3.0
+SCALE_LEARN_EXCITATION_MPS = 1.0
+V_MEAN_TAU_S = 5.0  # the recent mean's memory
+ITERATIONS_FIRST = 4  # the first sample's relinearisations (Gauss-Newton: 4 meet a 3 m/s wind from calm)
+
+
+def scale_in_state(drag: DragModel) -> bool:
+    return drag.rel_sd <= SCALE_STATE_MAX_REL_SD
+
+
+def model_sd(drag: DragModel, airspeed_mps, accel_bias_mps2, slope_per_s):
+    """What no filter state covers (m/s): an accelerometer bias over the drag's slope per unit mass, and
+    for a drag whose scale is not a state, its relative error on the airspeed; numpy-vectorised."""
+    slope = np.asarray(slope_per_s, float)
+    out = np.where(slope > 0, accel_bias_mps2 / np.where(slope > 0, slope, 1.0), np.inf)
+    if not scale_in_state(drag):
+        out = np.hypot(out, drag.rel_sd * np.asarray(airspeed_mps, float))
+    return float(out) if out.ndim == 0 else out
+
+
+def worse_axis_sd(pnn, pne, pee):
+    """The 1 σ along the worse axis of a 2×2 covariance; numpy-vectorised."""
+    half = 0.5 * (np.asarray(pnn) + pee)
+    return np.sqrt(np.maximum(half + np.sqrt(np.maximum(0.25 * (np.asarray(pnn) - pee) ** 2 + np.asarray(pne) ** 2,
+                                                        0.0)), 0.0))  # fmt: skip
 
 
 @dataclass
@@ -36,81 +87,109 @@ class WindFilter:
     mass_kg: float
     wn_mps: float = 0.0
     we_mps: float = 0.0
+    scale_error: float = 0.0  # ε: the vehicle drags (1 + ε) times the model
     initial_sd_mps: float = INITIAL_SD_MPS
     accel_sd_mps2: float = ACCEL_SD_MPS2
     accel_bias_mps2: float = ACCEL_BIAS_MPS2
     process_sd_mps: float = PROCESS_SD_MPS
-    p: list[float] = field(default_factory=list)  # covariance [pnn, pne, pee]
-    noise_var: float = 0.0  # the measurement variance the innovations show
+    p: list[list[float]] = field(default_factory=list)  # covariance of (wn, we, ε), 3×3
+    noise_var: float = NOISE_INITIAL_MPS2**2  # the measurement variance the innovations show
     t_s: float | None = None
+    t_first_s: float | None = None  # the first sample's time
     samples: int = 0
-    airspeed_mps: float = 0.0  # the horizontal air speed at the last sample (what the model floor scales with)
+    airspeed_mps: float = 0.0  # the horizontal air speed at the last sample
+    v_mean_ned: tuple[float, float] | None = None  # the horizontal velocity's recent mean
     slope_per_s: float = math.inf  # the drag's slope per unit mass there (the weakest axis): how well it sees
 
     def __post_init__(self) -> None:
         if not self.p:
-            self.p = [self.initial_sd_mps**2, 0.0, self.initial_sd_mps**2]
+            self.seed(self.wn_mps, self.we_mps, self.initial_sd_mps)
+
+    def seed(self, wn_mps: float, we_mps: float, sd_mps: float) -> None:
+        """Start from a wind known to ``sd_mps`` (an operator's measurement), the drag's scale to its rel_sd."""
+        self.wn_mps, self.we_mps = wn_mps, we_mps
+        # a drag known exactly still gets a state; one whose scale is not a state holds ε at 0
+        e = max(self.drag.rel_sd, 1e-3) ** 2 if scale_in_state(self.drag) else 0.0
+        v = sd_mps**2
+        self.p = [[v, 0.0, 0.0], [0.0, v, 0.0], [0.0, 0.0, e]]
 
     # -- the filter ------------------------------------------------------------------------------------
     def predict(self, t_s: float) -> None:
         if self.t_s is not None and t_s > self.t_s:
             q = self.process_sd_mps**2 * (t_s - self.t_s)
-            self.p[0] += q
-            self.p[2] += q
+            self.p[0][0] += q
+            self.p[1][1] += q
         self.t_s = t_s if self.t_s is None else max(self.t_s, t_s)
 
     def update(self, t_s: float, v_ned: tuple[float, float, float], q_wxyz: tuple[float, float, float, float],
-               f_body_xy: tuple[float, float]) -> None:  # fmt: skip
-        """One sample: velocity NED (m/s), attitude (body → NED), specific force along body x, y (m/s²)."""
+               f_body: tuple[float, ...]) -> None:  # fmt: skip
+        """One sample: velocity NED (m/s), attitude (body → NED), specific force along body x, y and, where
+        known, z (m/s²: the thrust, which the rotors' momentum drag grows with)."""
+        f_body_xy = f_body[:2]
+        thrust_ratio = abs(f_body[2]) / G_MPS2 if len(f_body) > 2 and math.isfinite(f_body[2]) else 1.0
         vals = (*v_ned, *q_wxyz, *f_body_xy)
         if not all(math.isfinite(x) for x in vals):
             return
         prev = self.t_s
         self.predict(t_s)
-        qw, qx, qy, qz = q_wxyz
+        if self.t_first_s is None:
+            self.t_first_s = t_s
         m = self.mass_kg
-        bx, by, _ = ned_to_body(v_ned[0] - self.wn_mps, v_ned[1] - self.we_mps, v_ned[2], qw, qx, qy, qz)
-        fx, fy = self.drag.force_n(bx, by)
-        sx, sy = self.drag.slope_n_per_mps(bx, by)
+        x0 = (self.wn_mps, self.we_mps, self.scale_error)
+        p = self.p
         # ∂(body x, y)/∂(wn, we) = −Rᵀ's first two columns' x, y rows: the NED axes' body components
-        ax, ay, _ = ned_to_body(1.0, 0.0, 0.0, qw, qx, qy, qz)
-        cx, cy, _ = ned_to_body(0.0, 1.0, 0.0, qw, qx, qy, qz)
-        # h = F(v_b)/m; ∂h/∂w = (−slope/m)·(−∂v_b/∂v) = slope/m · (body components of the NED axes)
-        h = ((sx / m) * ax, (sx / m) * cx, (sy / m) * ay, (sy / m) * cy)  # rows: body x, body y
-        innov = (f_body_xy[0] - fx / m, f_body_xy[1] - fy / m)
-        pnn, pne, pee = self.p
-        # S = H P Hᵀ + R
-        hp = ((h[0] * pnn + h[1] * pne, h[0] * pne + h[1] * pee), (h[2] * pnn + h[3] * pne, h[2] * pne + h[3] * pee))
-        s00 = hp[0][0] * h[0] + hp[0][1] * h[1]
-        s01 = hp[0][0] * h[2] + hp[0][1] * h[3]
-        s11 = hp[1][0] * h[2] + hp[1][1] * h[3]
-        seen = 0.5 * (innov[0] ** 2 + innov[1] ** 2) - 0.5 * (s00 + s11)
-        dt = min(max(t_s - prev, 0.0), 1.0) if prev is not None else 0.0
-        a = min(dt / NOISE_TAU_S, 1.0) if self.samples else 1.0
-        self.noise_var = (1.0 - a) * self.noise_var + a * max(seen, 0.0)
-        r = max(self.accel_sd_mps2**2, self.noise_var)
-        s00 += r
-        s11 += r
-        det = s00 * s11 - s01 * s01
-        if det <= 0 or not math.isfinite(det):
-            return
-        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-        # K = P Hᵀ S⁻¹ (2×2): P Hᵀ columns are hp rows
-        k00 = hp[0][0] * i00 + hp[1][0] * i01
-        k01 = hp[0][0] * i01 + hp[1][0] * i11
-        k10 = hp[0][1] * i00 + hp[1][1] * i01
-        k11 = hp[0][1] * i01 + hp[1][1] * i11
-        self.wn_mps += k00 * innov[0] + k01 * innov[1]
-        self.we_mps += k10 * innov[0] + k11 * innov[1]
-        # P = (I − K H) P
-        a00 = 1.0 - (k00 * h[0] + k01 * h[2])
-        a01 = -(k00 * h[1] + k01 * h[3])
-        a10 = -(k10 * h[0] + k11 * h[2])
-        a11 = 1.0 - (k10 * h[1] + k11 * h[3])
-        nn = a00 * pnn + a01 * pne
-        ne = a00 * pne + a01 * pee
-        ee = a10 * pne + a11 * pee
-        self.p = [max(nn, 0.0), ne, max(ee, 0.0)]
+        ax, ay, _ = ned_to_body(1.0, 0.0, 0.0, *q_wxyz)
+        cx, cy, _ = ned_to_body(0.0, 1.0, 0.0, *q_wxyz)
+        # the first sample relinearises (an iterated EKF): at an unknown wind the drag's slope, and the
+        # scale's share (∂h/∂ε = F/m, zero at zero air) are taken where the air is not
+        mean = self.v_mean_ned or (v_ned[0], v_ned[1])
+        dt_s = min(max(t_s - prev, 0.0), 1.0) if prev is not None else 0.0
+        w_mean = min(dt_s / V_MEAN_TAU_S, 1.0)
+        self.v_mean_ned = (mean[0] + w_mean * (v_ned[0] - mean[0]), mean[1] + w_mean * (v_ned[1] - mean[1]))
+        learn = (scale_in_state(self.drag) and t_s - self.t_first_s >= SCALE_LEARN_AFTER_S
+                 and math.hypot(v_ned[0] - mean[0], v_ned[1] - mean[1]) > SCALE_LEARN_EXCITATION_MPS)  # fmt: skip
+        x = x0
+        for _ in range(ITERATIONS_FIRST if not self.samples else 1):
+            k = 1.0 + x[2]
+            bx, by, _ = ned_to_body(v_ned[0] - x[0], v_ned[1] - x[1], v_ned[2], *q_wxyz)
+            fx, fy = self.drag.force_n(bx, by, thrust_ratio)
+            sx, sy = self.drag.slope_n_per_mps(bx, by, thrust_ratio)
+            # h = (1 + ε)·F(v_b)/m; ∂h/∂w = (1 + ε)·slope/m · (the NED axes' body components); ∂h/∂ε = F/m
+            h = ((k * sx / m * ax, k * sx / m * cx, fx / m), (k * sy / m * ay, k * sy / m * cy, fy / m))
+            dx = (x0[0] - x[0], x0[1] - x[1], x0[2] - x[2])
+            innov = (f_body_xy[0] - k * fx / m - sum(h[0][j] * dx[j] for j in range(3)),
+                     f_body_xy[1] - k * fy / m - sum(h[1][j] * dx[j] for j in range(3)))  # fmt: skip
+            # P Hᵀ (3×2) and S = H P Hᵀ + R (2×2)
+            pht = [[sum(p[i][j] * h[r][j] for j in range(3)) for r in range(2)] for i in range(3)]
+            s00 = sum(h[0][i] * pht[i][0] for i in range(3))
+            s01 = sum(h[0][i] * pht[i][1] for i in range(3))
+            s11 = sum(h[1][i] * pht[i][1] for i in range(3))
+            if x is x0:
+                seen = 0.5 * (innov[0] ** 2 + innov[1] ** 2) - 0.5 * (s00 + s11)
+                a = min(dt_s / NOISE_TAU_S, 1.0)
+                self.noise_var = (1.0 - a) * self.noise_var + a * max(seen, 0.0)
+            r = max(self.accel_sd_mps2**2, self.noise_var)
+            s00 += r
+            s11 += r
+            det = s00 * s11 - s01 * s01
+            if det <= 0 or not math.isfinite(det):
+                return
+            i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+            # K = P Hᵀ S⁻¹ (3×2); ε's row zero while it is only considered
+            kg = [(row[0] * i00 + row[1] * i01, row[0] * i01 + row[1] * i11) for row in pht]
+            if not learn:
+                kg[2] = (0.0, 0.0)
+            x = tuple(x0[i] + kg[i][0] * innov[0] + kg[i][1] * innov[1] for i in range(3))
+        self.wn_mps, self.we_mps, self.scale_error = x[0], x[1], max(x[2], SCALE_MIN)
+        # P ← P − K (P Hᵀ)ᵀ − (P Hᵀ) Kᵀ + K S Kᵀ: right for any gain (the optimal one reduces it to P − K H P)
+        ks = [(g[0] * s00 + g[1] * s01, g[0] * s01 + g[1] * s11) for g in kg]
+        new = [[p[i][j] - (kg[i][0] * pht[j][0] + kg[i][1] * pht[j][1]) - (pht[i][0] * kg[j][0] + pht[i][1] * kg[j][1])
+                + (ks[i][0] * kg[j][0] + ks[i][1] * kg[j][1]) for j in range(3)] for i in range(3)]  # fmt: skip
+        for i in range(3):
+            new[i][i] = max(new[i][i], 0.0)
+            for j in range(i):
+                new[i][j] = new[j][i] = 0.5 * (new[i][j] + new[j][i])
+        self.p = new
         self.samples += 1
         self.airspeed_mps = math.hypot(v_ned[0] - self.wn_mps, v_ned[1] - self.we_mps)
         self.slope_per_s = float(min(sx, sy)) / m
@@ -118,17 +197,18 @@ class WindFilter:
     # -- what it knows ---------------------------------------------------------------------------------
     @property
     def filter_sd_mps(self) -> float:
-        """The filter's own 1 σ along its worse axis."""
-        pnn, pne, pee = self.p
-        half = 0.5 * (pnn + pee)
-        return math.sqrt(max(half + math.sqrt(max(0.25 * (pnn - pee) ** 2 + pne * pne, 0.0)), 0.0))
+        """The filter's own 1 σ along its worse axis (the scale error's share included)."""
+        return float(worse_axis_sd(self.p[0][0], self.p[0][1], self.p[1][1]))
+
+    @property
+    def scale_sd(self) -> float:
+        return math.sqrt(max(self.p[2][2], 0.0))
 
     @property
     def model_sd_mps(self) -> float:
-        """What averaging cannot remove: the drag model's relative error on the airspeed it infers, and an
-        accelerometer bias seen through the drag's slope."""
-        bias = self.accel_bias_mps2 / self.slope_per_s if self.slope_per_s > 0 else math.inf
-        return math.hypot(self.drag.rel_sd * self.airspeed_mps, bias)
+        """What the filter's states do not cover: an accelerometer bias seen through the drag's slope (and an
+        assumed drag's error on the airspeed)."""
+        return model_sd(self.drag, self.airspeed_mps, self.accel_bias_mps2, self.slope_per_s)
 
     @property
     def sd_mps(self) -> float:

@@ -11,10 +11,11 @@ kept in a cache keyed by everything they depend on: a second flight of the same 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,28 @@ def _key(profile: VehicleProfile, plan: dict[str, Any], speed_mps: float, radius
     return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 
+@contextlib.contextmanager
+def _planning(base: Path) -> Iterator[None]:
+    """One process plans a key at a time: a second flighttest (a campaign's next step, another test) waits for
+    the first's plan and loads it instead of spending the same minute of IPOPT beside it."""
+    try:
+        import fcntl
+    except ImportError:  # Windows: no advisory locks, both plan
+        yield
+        return
+    try:
+        base.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(f"{base}.lock", os.O_CREAT | os.O_RDWR, 0o644)
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing releases the lock
+
+
 def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_mps: list[float], radius_mps: float,
                           solve: Callable[[float, float], Trajectory],
                           progress: Callable[[str], None] = lambda _: None) -> list[Trajectory]:  # fmt: skip
@@ -52,21 +75,22 @@ def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_
     root = cache_dir()
     for s in speeds_mps:
         base = root / f"helix-{profile.name}-{_key(profile, plan, s, radius_mps)}"
-        try:
-            out.append(Trajectory.load(base, profile))
-            continue
-        except FlighttestError:
-            pass
-        progress(f"planning the helix for {s:g} m/s of wind (±{radius_mps:g} m/s): a few seconds")
-        try:
-            traj = solve(s, radius_mps)
-        except FlighttestError as exc:
-            progress(f"no helix for {s:g} m/s of wind: {exc}")
-            continue
-        try:
-            base.parent.mkdir(parents=True, exist_ok=True)
-            traj.save(base)
-        except OSError:
-            pass  # a cache that cannot be written plans again next time, nothing worse
-        out.append(traj)
+        with _planning(base):
+            try:
+                out.append(Trajectory.load(base, profile))
+                continue
+            except FlighttestError:
+                pass
+            progress(f"planning the helix for {s:g} m/s of wind (±{radius_mps:g} m/s): up to a minute")
+            try:
+                traj = solve(s, radius_mps)
+            except FlighttestError as exc:
+                progress(f"no helix for {s:g} m/s of wind: {exc}")
+                continue
+            try:
+                base.parent.mkdir(parents=True, exist_ok=True)
+                traj.save(base)
+            except OSError:
+                pass  # a cache that cannot be written plans again next time, nothing worse
+            out.append(traj)
     return out

@@ -1,0 +1,70 @@
+"""The helix and the vertical baseline flown in wind on the fake (issue 21), in real time over UDP with real
+MAVSDK, PX4's personality and ArduCopter's: the fake reports no wind (neither autopilot does by default), so
+flighttest estimates it from the drag its IMU feels, plans for it in the start hover, and guards the air.
+
+Judged from the fake's truth log: the true air-relative blade-frame velocity never entered the guard region
+while the guard stayed silent (no true entry unseen), and the guard did not abort a flight the air made safe.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flighttest.model.profiles import load_profile
+from test_fly_missions import assert_complete_log, ci_config, events, truth
+
+pytestmark = pytest.mark.flight
+
+FLY_TIMEOUT_S = 300  # the first flight of a session plans the helix for its winds too
+
+
+def fly(fake, vehicle: str, mission: str, tmp_path: Path) -> dict:
+    cmd = [sys.executable, "-m", "flighttest", "fly", mission, "--connect", fake.url, "--vehicle", vehicle,
+           "--height", "7", "--descent", "5", "--config", str(ci_config(tmp_path, mission)), "--log-dir",
+           str(tmp_path / "logs"), "--json", "--yes"]  # fmt: skip
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=FLY_TIMEOUT_S, stdin=subprocess.DEVNULL)
+    s = json.loads(p.stdout)
+    s["_stderr"] = p.stderr
+    return s
+
+
+CASES = [  # (vehicle, the fake's options, mission, wind NED, gust sd)
+    ("x500", {}, "helix", (0.0, 3.0, 0.0), 0.0),
+    ("x500", {}, "vertical", (-2.1, 2.1, 0.0), 0.6),
+    ("arducopter_sitl", {"autopilot": "ardupilot", "ekf_delay_s": 2.0}, "helix", (2.1, -2.1, 0.0), 0.6),
+    ("arducopter_sitl", {"autopilot": "ardupilot", "ekf_delay_s": 2.0}, "vertical", (0.0, -3.0, 0.0), 0.0),
+]
+
+
+@pytest.mark.parametrize(("vehicle", "options", "mission", "wind", "gust"), CASES,
+                         ids=[f"{c[0]}-{c[2]}-{'gusts' if c[4] else 'steady'}" for c in CASES])  # fmt: skip
+def test_in_3_mps_of_wind_the_descent_is_flown_and_the_air_never_entered_the_region_unseen(
+    fake_vehicle_factory, tmp_path, vehicle, options, mission, wind, gust
+):
+    prof = load_profile(vehicle)
+    fake = fake_vehicle_factory(vehicle, wind_ned=wind, gust_mps=gust, **options)
+    s = fly(fake, vehicle, mission, tmp_path)
+    tr = truth(fake)
+    st = tr[tr["kind"] == "state"]
+    # the true air across the disk, judged by the guard's own region (the truth log's w/u are air-relative)
+    margin = np.asarray(prof.guard_region(margin_mps=0.0).margin(st["w_mps"].to_numpy(), st["u_mps"].to_numpy()))
+    flying = (st["armed"] == 1) & (-st["d_m"] > 0.5)
+    entered = bool((margin[flying.to_numpy()] < 0).any())
+    assert s["outcome"] == "completed", s.get("abort_reason") or s["_stderr"][-2000:]
+    deepest = -margin[flying.to_numpy()].min()
+    assert not entered, f"the air entered the region by {deepest:.2f} m/s with the guard silent"
+    assert_complete_log(s["log_dir"])
+    # flighttest knew the wind it judged: its own estimate, within what it said of it
+    assert s["wind_source"] == "flighttest"
+    err = math.hypot(s["wind_ned_mps"][0] - wind[0], s["wind_ned_mps"][1] - wind[1])
+    assert err <= 2.45 * s["wind_sd_mps"] + 2.0 * gust
+    chosen = next(e for e in events(s["log_dir"]) if e["event"] == "wind_plan")
+    speeds = [c["planned_wind_mps"] for c in chosen["candidates"]]
+    assert chosen["wind_source"] == "flighttest" and (mission != "helix" or max(speeds) > 0)
