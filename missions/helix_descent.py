@@ -21,7 +21,7 @@ from flighttest.model.trajectory import Trajectory
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.helix import solve_helix
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
-from flighttest.planner.wind_plans import helix_plans_for_winds, wind_speeds
+from flighttest.planner.wind_plans import SOLVE_MAX_S, helix_plans_for_winds, wind_speeds
 
 CONFIG = Path(__file__).with_suffix(".toml")
 
@@ -58,7 +58,7 @@ def plans_for_wind(profile: VehicleProfile, cfg: MissionConfig, progress=lambda 
                                            margin=TrackingMargin.from_plan(p), n_intervals=hp.n_intervals,
                                            n_coarse=hp.n_coarse, wind_ned_mps=(0.0, speed_mps, 0.0),
                                            wind_radius_mps=radius_mps)  # fmt: skip
-        sol = solve_helix(problem)
+        sol = solve_helix(problem, max_solve_s=SOLVE_MAX_S)
         if not sol.success:
             raise FlighttestError(f"the planner did not converge ({sol.result.status})")
         return helix_trajectory(sol, profile.name, profile.mass_kg, extra={"tracking_margin": dict(p)})

@@ -12,13 +12,14 @@ import json
 import math
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from flighttest.model.profiles import load_profile
-from test_fly_missions import assert_complete_log, ci_config, events, truth
+from test_fly_missions import assert_complete_log, assert_safe_end, ci_config, events, truth
 
 pytestmark = pytest.mark.flight
 
@@ -43,6 +44,12 @@ CASES = [  # (vehicle, the fake's options, mission, wind NED, gust sd)
 ]
 
 
+# The x500's drag is known to ±8 % (rel_sd): in 3 m/s of air its hover's wind is uncertain by about 0.28 m/s,
+# and the guard judges the worst air within 2.45 σ (0.69 m/s) while the helix plunges. On the fake that can end
+# the helix in a guard abort with the truth clear (bench/RESULTS.md, "Plans for the wind"): never optimistic.
+HELIX_MAY_ABORT_CONSERVATIVELY = {("x500", "helix")}
+
+
 @pytest.mark.parametrize(("vehicle", "options", "mission", "wind", "gust"), CASES,
                          ids=[f"{c[0]}-{c[2]}-{'gusts' if c[4] else 'steady'}" for c in CASES])  # fmt: skip
 def test_in_3_mps_of_wind_the_descent_is_flown_and_the_air_never_entered_the_region_unseen(
@@ -52,15 +59,27 @@ def test_in_3_mps_of_wind_the_descent_is_flown_and_the_air_never_entered_the_reg
     fake = fake_vehicle_factory(vehicle, wind_ned=wind, gust_mps=gust, **options)
     s = fly(fake, vehicle, mission, tmp_path)
     tr = truth(fake)
-    st = tr[tr["kind"] == "state"]
-    # the true air across the disk, judged by the guard's own region (the truth log's w/u are air-relative)
-    margin = np.asarray(prof.guard_region(margin_mps=0.0).margin(st["w_mps"].to_numpy(), st["u_mps"].to_numpy()))
-    flying = (st["armed"] == 1) & (-st["d_m"] > 0.5)
-    entered = bool((margin[flying.to_numpy()] < 0).any())
-    assert s["outcome"] == "completed", s.get("abort_reason") or s["_stderr"][-2000:]
-    deepest = -margin[flying.to_numpy()].min()
-    assert not entered, f"the air entered the region by {deepest:.2f} m/s with the guard silent"
+    assert_safe_end(tr)
     assert_complete_log(s["log_dir"])
+    st = tr[tr["kind"] == "state"]
+    # the true air across the disk, judged by the guard's own region (the truth log's w/u are air-relative),
+    # while the guard is armed: above the mission's floor (below it the autopilot lands, in ground effect)
+    margin = np.asarray(prof.guard_region(margin_mps=0.0).margin(st["w_mps"].to_numpy(), st["u_mps"].to_numpy()))
+    floor_m = tomllib.loads((tmp_path / f"{mission}-ci.toml").read_text())["flight"]["min_alt_m"]
+    guarded = ((st["armed"] == 1) & (-st["d_m"] > floor_m)).to_numpy()
+    unix = st["unix_s"].to_numpy(float)
+    abort = next((e for e in events(s["log_dir"]) if e["event"] == "abort"), None)
+    if abort is not None:  # what follows the abort is the ladder's, judged by its own tests
+        guarded = guarded & (unix < abort["unix_s"])
+    deepest = -margin[guarded].min()
+    assert deepest <= 0.0, f"the air entered the region by {deepest:.2f} m/s with the guard silent"
+    if s["outcome"] != "completed":
+        # only the guard, and only early: the truth was clear when it acted
+        assert (vehicle, mission) in HELIX_MAY_ABORT_CONSERVATIVELY, s.get("abort_reason") or s["_stderr"][-2000:]
+        assert abort is not None and abort["phase"] == "stream", abort
+        assert abort["reason"].startswith(("predicted", "marginal", "in guard region")), abort["reason"]
+        at = int(np.searchsorted(unix, abort["unix_s"]))
+        assert margin[max(at - 25, 0) : at + 1].min() > 0.0
     # flighttest knew the wind it judged: its own estimate, within what it said of it
     assert s["wind_source"] == "flighttest"
     err = math.hypot(s["wind_ned_mps"][0] - wind[0], s["wind_ned_mps"][1] - wind[1])

@@ -12,6 +12,8 @@ from flighttest.errors import FlighttestError
 from flighttest.flying.plan_config import HelixPlanConfig
 from flighttest.model.profiles import load_profile
 from flighttest.planner.export import vertical_trajectory
+from flighttest.planner.helix import solve_helix
+from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
 from flighttest.planner.vertical import plan_vertical
 from flighttest.planner.wind_plans import helix_plans_for_winds, wind_speeds
 
@@ -46,9 +48,17 @@ def test_the_ladder_of_speeds():
     assert wind_speeds(6.0, 1.0) == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
     assert wind_speeds(5.0, 2.0) == [2.0, 4.0]
     assert wind_speeds(6.0, 0.0) == [] and wind_speeds(0.0, 1.0) == []
-    # the default covers a wind anywhere between two steps known to ±0.75 m/s (2.45 σ of 0.3 m/s)
+    # every wind between two steps is within a plan's radius of one (the hover judges its uncertainty)
     hp = HelixPlanConfig()
-    assert hp.wind_radius_mps >= hp.wind_step_mps / 2 + 2.45 * 0.3
+    assert hp.wind_radius_mps >= hp.wind_step_mps / 2
+
+
+def test_a_solve_that_runs_out_of_time_is_no_plan():
+    prof = load_profile("x500")
+    problem = helix_problem_for_flight(prof, height_m=3.0, radius_m=2.0, margin=TrackingMargin(),
+                                       wind_ned_mps=(0.0, 2.0, 0.0), wind_radius_mps=0.5)  # fmt: skip
+    sol = solve_helix(problem, max_solve_s=0.01)
+    assert not sol.success and "WallTime" in sol.result.status
 
 
 def test_plans_are_cached_by_what_they_depend_on(cache):

@@ -639,9 +639,16 @@ def _long_spec(p: HelixProblem, n: int) -> OcpSpec:
     return spec
 
 
-def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
+def _capped(spec: OcpSpec, max_solve_s: float | None) -> OcpSpec:
+    if max_solve_s is not None:
+        spec.ipopt_options = {**spec.ipopt_options, "ipopt.max_wall_time": float(max_solve_s)}
+    return spec
+
+
+def solve_helix(p: HelixProblem, verbose: bool = False, max_solve_s: float | None = None) -> HelixSolution:
     """Warm start, fine solve, then bounds tightened where the 1 kHz dense re-simulation leaves them
-    between nodes (≤ 3 rounds).
+    between nodes (≤ 3 rounds). ``max_solve_s`` caps each IPOPT solve's wall time (one that runs out
+    is not a success).
 
     Warm start: the steady helix (``steady_helix_guess``) sets the expected duration. A short
     descent (≤ ``LONG_DESCENT_S``) is solved as it always was: from helices of 1 and 2 turns on the
@@ -666,7 +673,7 @@ def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
     t_steady, _ = steady_helix_duration(p)
     attempts: list[dict] = []
     if t_steady <= LONG_DESCENT_S:
-        coarse = MinTimeOcp(_spec(p, p.n_coarse), verbose=verbose)
+        coarse = MinTimeOcp(_capped(_spec(p, p.n_coarse), max_solve_s), verbose=verbose)
         t_guess = max(2.0, 2.5 * math.sqrt(p.height_m))
 
         def solve_start(turns: float) -> OcpResult:
@@ -674,7 +681,8 @@ def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
             return coarse.solve(t_guess, xg, ug, name=f"helix{turns:g}")
 
         def refinement_for(_turns: float) -> _Tightening:
-            fine = coarse if p.n_intervals == p.n_coarse else MinTimeOcp(_spec(p, p.n_intervals), verbose=verbose)
+            fine = (coarse if p.n_intervals == p.n_coarse
+                    else MinTimeOcp(_capped(_spec(p, p.n_intervals), max_solve_s), verbose=verbose))  # fmt: skip
             return _Tightening(p, fine, None)
 
         final = multistart_refined((1.0, 2.0), solve_start, refinement_for, TIGHTEN_ROUNDS, attempts,
@@ -682,7 +690,7 @@ def solve_helix(p: HelixProblem, verbose: bool = False) -> HelixSolution:
     else:
         mesh = long_descent_mesh(p, t_steady)
         n = len(mesh)
-        fine = MinTimeOcp(_long_spec(p, n), verbose=verbose)
+        fine = MinTimeOcp(_capped(_long_spec(p, n), max_solve_s), verbose=verbose)
         t_g, x_dense, u_dense = steady_helix_guess(p, 20 * n)
         t_dense = np.linspace(0.0, t_g, 20 * n + 1)
         t_s = t_g * np.concatenate([[0.0], np.cumsum(mesh)])

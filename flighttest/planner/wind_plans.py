@@ -24,6 +24,11 @@ from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import Trajectory
 
+# Each IPOPT solve of a plan for the wind stops after this long: a wind the vehicle can barely serve can
+# otherwise take IPOPT thousands of slow iterations (arducopter_sitl, 5 m/s: bench/RESULTS.md, "Plans for
+# the wind"), and a ladder that would serve it no better is left without that rung.
+SOLVE_MAX_S = 20.0
+
 
 def cache_dir() -> Path:
     return Path(os.environ.get("FLIGHTTEST_CACHE", "~/.cache/flighttest")).expanduser() / "plans"
