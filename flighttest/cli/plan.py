@@ -53,8 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "planar",
         help="planar minimum-time descent (paper Table II cases or your bounds)",
         description="Paper's planar model (Y, V_Y, Z, V_Z, φ; f_coll, ω). --case N reproduces Table II with "
-        "its bounds (thrust may go negative there); otherwise bounds come from --vehicle (thrust ≥ 0) "
-        "and the options below.",
+        "its bounds (thrust may go negative there; the flips, cases 5-6, at 5 rad/s, not Table I's 1: "
+        "docs/PAPER.md); otherwise bounds come from --vehicle (thrust ≥ 0) and the options below.",
     )
     pp.add_argument("--case", type=int, choices=range(1, 7), metavar="N", help="Table II case 1-6")
     pp.add_argument("--height", type=ip.HEIGHT_M, default=5.0, metavar="M", help="descent height (default 5)")
