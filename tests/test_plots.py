@@ -113,7 +113,7 @@ def test_the_plan_plot_unwraps_yaw_and_marks_the_ends_in_distinct_colours(vertic
         yaw = next(ln for ln in panels["attitude"].get_lines() if ln.get_label() == "yaw").get_ydata()
         assert np.abs(np.diff(yaw)).max() < 5.0 and np.ptp(yaw) > 360.0
         # start and end: on the first and the last point of the path and of the height
-        for title in ("path, seen from the side (straight down)", "height"):
+        for title in ("path, seen from the side", "height"):
             rings, squares = _ends(panels[title])
             line = panels[title].get_lines()[0]
             assert rings[0].get_ydata()[0] == pytest.approx(line.get_ydata()[0])

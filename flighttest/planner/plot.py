@@ -59,21 +59,21 @@ def _draw_path(fig, a, traj: Trajectory) -> None:
     from flighttest.model.chart import mark_ends
 
     n, e, d = traj.column("n_m"), traj.column("e_m"), traj.column("d_m")
-    if max(np.ptp(n), np.ptp(e)) > MOVES_SIDEWAYS_M:
+    if np.ptp(n) > MOVES_SIDEWAYS_M:
         sc = a.scatter(e, n, c=-d, s=4, cmap="viridis", zorder=2)
         fig.colorbar(sc, ax=a, label="height relative to the start, m")
         mark_ends(a, e, n)
         a.set_ylabel("north, m")
         a.set_title("path, seen from above")
-    else:  # straight down: a side view says more than a dot
+        a.set_aspect("equal", adjustable="datalim")
+    else:  # in the east-down plane (planar, straight down): a side view says more than a line seen from above
         a.plot(e, -d, color="tab:blue", lw=1.5)
         mark_ends(a, e, -d)
-        a.set_xlim(-0.5, 0.5)
+        if np.ptp(e) <= MOVES_SIDEWAYS_M:
+            a.set_xlim(-0.5, 0.5)
         a.set_ylabel("height relative to the start, m")
-        a.set_title("path, seen from the side (straight down)")
+        a.set_title("path, seen from the side")
     a.set_xlabel("east, m")
-    if max(np.ptp(n), np.ptp(e)) > MOVES_SIDEWAYS_M:
-        a.set_aspect("equal", adjustable="datalim")
     a.legend(loc="best", fontsize=8)
 
 
@@ -113,6 +113,7 @@ def trajectory_figure(traj: Trajectory, constraint: VelocityConstraint, wind_ned
         mark_ends,
     )
 
+    whose = "guard" if guard is not None else "the plan's"  # no vehicle (Table II): the plan's own region
     guard = guard or constraint
     t = traj.t_s
     fig, ax = plt.subplots(2, 3, figsize=(16, 9))
@@ -159,8 +160,8 @@ def trajectory_figure(traj: Trajectory, constraint: VelocityConstraint, wind_ned
 
     w, u = blade_series(traj, wind_ned_mps)
     g_bound = _bound(guard, u)
-    region = "guard region: forbidden"
-    boundary = f"guard boundary: {_describe(guard)}"
+    region = f"{whose} region: forbidden"
+    boundary = f"{whose} boundary: {_describe(guard)}"
     plan_line = None if _same(guard, constraint) else f"the plan's bound: {_describe(constraint)}"
 
     a = ax[1, 1]
@@ -199,6 +200,8 @@ def trajectory_figure(traj: Trajectory, constraint: VelocityConstraint, wind_ned
         a.grid(True, alpha=0.3)
     basis = traj.meta.get("plan_basis")
     what = {"mission": " as the mission flies it", "paper": ", the paper's problem"}.get(basis, "")
-    fig.suptitle(title or f"{traj.kind} plan for {traj.meta.get('vehicle', '?')}{what}: t_f = {traj.duration_s:.2f} s")
+    case = traj.meta.get("table_case")
+    of = f"the paper's Table II case {case}" if case else f"{traj.meta.get('vehicle', '?')}{what}"
+    fig.suptitle(title or f"{traj.kind} plan for {of}: t_f = {traj.duration_s:.2f} s")
     fig.tight_layout(rect=(0, 0.06, 1, 1))
     return fig
