@@ -95,6 +95,8 @@ def plot_altitude(a: Analysis, out: Path) -> Path:
     s = a.log.state
     h = a.heights
     plan = planned_path(a.log)
+    if plan is not None and len(s):  # the flight's time axis: a sweep stopped early does not stretch it
+        plan = plan[plan["t_s"] <= float(s["t_s"].iloc[-1])]
     estimator = a.log.heights[0].name if a.log.heights else "estimator"
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True, dpi=100)
     trusted = "altitude (−d)"
