@@ -22,7 +22,6 @@ from rich.console import Console
 from flighttest.analysis import report
 from flighttest.analysis.pipeline import analyse_path
 from flighttest.analysis.planned import planned_path
-from flighttest.analysis.synthetic import UNIX0, SyntheticFlight, write_tlog
 from flighttest.cli import main
 from flighttest.flying.mission_scripts import MISSIONS_DIR, load_mission_module, mission_config_path
 from flighttest.flying.missions_config import load_mission_config
@@ -32,6 +31,7 @@ from flighttest.model.profiles import load_profile
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.plot import trajectory_figure
 from flighttest.planner.problems import vehicle_constraint, vertical_constraint, vertical_plan
+from synthetic import UNIX0, SyntheticFlight, write_tlog
 
 
 @pytest.fixture(scope="module")

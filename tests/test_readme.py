@@ -1,5 +1,5 @@
-"""The README runs as written: every ```bash block of README.md is run here against the fake, or says
-why not.
+"""The README runs as written: every ```bash and ```python block of README.md is run here against the
+fake, or says why not.
 
 Each block is preceded by a marker, an HTML comment the rendered README does not show:
 
@@ -8,7 +8,8 @@ Each block is preceded by a marker, an HTML comment the rendered README does not
 - ``<!-- readme-test: hardware ... -->``: needs a real vehicle (or PX4 SITL); not run;
 - ``<!-- readme-test: fake ... -->``: starts the fake in a terminal of its own; the test starts it on a
   free port instead of the README's, and puts that port wherever the README has its own;
-- ``<!-- readme-test: run -->``: run with bash (``set -e``) in an empty folder, against that fake.
+- ``<!-- readme-test: run -->``: run with bash (``set -e``), or this Python, in an empty folder, against
+  that fake.
 
 A block without a marker fails the fast test below: no command in the README goes untested unnoticed.
 """
@@ -29,22 +30,27 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 KINDS = ("setup", "hardware", "fake", "run")
 MARKER = re.compile(r"<!--\s*readme-test:\s*(\w+)[^>]*-->")
-FENCE = re.compile(r"^```bash\n(.*?)^```$", re.S | re.M)
+FENCE = re.compile(r"^```(bash|python)\n(.*?)^```$", re.S | re.M)
 
 
-def readme_blocks(text: str | None = None) -> list[tuple[str | None, str]]:
-    """(marker kind or None, block text) of every ```bash block, in order."""
+def readme_blocks(text: str | None = None) -> list[tuple[str | None, str, str]]:
+    """(marker kind or None, language, block text) of every ```bash and ```python block, in order."""
     text = README.read_text(encoding="utf-8") if text is None else text
     out = []
     for m in FENCE.finditer(text):
         before = text[: m.start()].rstrip().splitlines()
         marker = MARKER.fullmatch(before[-1].strip()) if before else None
-        out.append((marker.group(1) if marker else None, m.group(1)))
+        out.append((marker.group(1) if marker else None, m.group(1), m.group(2)))
     return out
 
 
-def blocks_of(kind: str) -> list[str]:
-    return [block for k, block in readme_blocks() if k == kind]
+def blocks_of(kind: str, lang: str | None = None) -> list[str]:
+    return [block for k, lg, block in readme_blocks() if k == kind and lang in (None, lg)]
+
+
+def run_blocks() -> list[tuple[str, str]]:
+    """(language, text) of the blocks the flight test runs."""
+    return [(lg, block) for k, lg, block in readme_blocks() if k == "run"]
 
 
 def fake_port_of(block: str) -> str:
@@ -57,10 +63,10 @@ def fake_port_of(block: str) -> str:
 # -- fast: the markers and what they promise ----------------------------------------------------------
 
 
-def test_every_bash_block_is_marked():
+def test_every_block_is_marked():
     blocks = readme_blocks()
     assert len(blocks) >= 5
-    unmarked = [b.splitlines()[0] for k, b in blocks if k not in KINDS]
+    unmarked = [b.splitlines()[0] for k, _, b in blocks if k not in KINDS]
     assert not unmarked, f"README blocks without a readme-test marker of {KINDS}: {unmarked}"
     assert len(blocks_of("fake")) == 1 and len(blocks_of("run")) >= 2 and len(blocks_of("setup")) == 2
 
@@ -75,7 +81,7 @@ def test_the_setup_blocks_are_what_ci_runs():
 def test_the_run_blocks_use_the_fake_and_the_hardware_blocks_do_not():
     port = fake_port_of(blocks_of("fake")[0])
     for block in blocks_of("run"):
-        urls = re.findall(r"--connect\s+(\S+)", block)
+        urls = re.findall(r"--connect\s+(\S+)", block) + re.findall(r"connect=\"([^\"]+)\"", block)
         assert urls and set(urls) == {f"udpout://127.0.0.1:{port}"}, block
         assert "<" not in block, f"a placeholder in a block that runs: {block!r}"
     for block in blocks_of("hardware"):
@@ -129,22 +135,26 @@ def _env(tmp_path: Path) -> dict[str, str]:
 
 @pytest.mark.flight
 @pytest.mark.timeout(900)
-@pytest.mark.parametrize("index", range(len(blocks_of("run"))), ids=lambda i: f"run-block-{i + 1}")
+@pytest.mark.parametrize("index", range(len(run_blocks())), ids=lambda i: f"run-block-{i + 1}")
 def test_the_readme_block_runs_against_the_fake(index, readme_fake, tmp_path):
     port, readme_port = readme_fake
-    block = re.sub(rf"\b{readme_port}\b", port, blocks_of("run")[index])
+    lang, block = run_blocks()[index]
+    block = re.sub(rf"\b{readme_port}\b", port, block)
     work = tmp_path / "work"
     work.mkdir()
     t0 = time.monotonic()
-    proc = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", block], cwd=work, env=_env(tmp_path),
-                          capture_output=True, text=True, timeout=840)  # fmt: skip
+    argv = [sys.executable, "-c", block] if lang == "python" else ["bash", "-e", "-o", "pipefail", "-c", block]
+    proc = subprocess.run(argv, cwd=work, env=_env(tmp_path), capture_output=True, text=True, timeout=840)
     assert proc.returncode == 0, f"exit {proc.returncode} after {time.monotonic() - t0:.0f} s\n{block}\n" + (
         proc.stdout[-4000:] + proc.stderr[-4000:]
     )
     assert "Traceback" not in proc.stderr
     home = tmp_path / "home"
     assert not (home / ".config" / "flighttest" / "vehicles").exists()  # the user's profiles untouched
-    if "campaign" in block:
+    if lang == "python":  # one flight: its outcome printed, its folder under logs/
+        assert proc.stdout.split()[0] == "completed", proc.stdout
+        assert [p.name.split("-")[-1] for p in (work / "logs").iterdir()] == ["helix"]
+    elif "campaign" in block:
         (out,) = [Path(m) for m in re.findall(r"-o\s+(\S+)", block)]
         assert (work / out / "report" / "summary.md").is_file()
         assert (work / out / "report" / "velocity_space.png").stat().st_size > 10_000

@@ -74,7 +74,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "helix",
         help="3D minimum-time descent: by default the helix `fly helix` flies; --paper: the paper's problem",
         description="Rigid body with quaternions; inputs collective thrust and body rates; thrust ≥ 0. By "
-        "default the plan `flighttest fly helix` flies: the helix mission's [plan] (its TOML as `fly` finds "
+        "default the plan `flighttest fly helix` flies in still air (in wind it also plans for winds and "
+        "chooses in the start hover): the helix mission's [plan] (its TOML as `fly` finds "
         "it: the end of `flighttest fly --help`), inside the guard's region by its tracking margin, at a "
         "fraction of the vehicle's tilt, body rates and thrust. --paper plans the paper's problem instead: "
         "the pure 20° cone at the vehicle's full tilt and body rates and 0.9 of its thrust (faster, and too "
