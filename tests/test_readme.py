@@ -152,7 +152,7 @@ def test_the_readme_block_runs_against_the_fake(index, readme_fake, tmp_path):
     home = tmp_path / "home"
     assert not (home / ".config" / "flighttest" / "vehicles").exists()  # the user's profiles untouched
     if lang == "python":  # one flight: its outcome printed, its folder under logs/
-        assert proc.stdout.split()[0] == "completed", proc.stdout
+        assert proc.stdout.strip().splitlines()[-1].split()[0] == "completed", proc.stdout  # the block's print
         assert [p.name.split("-")[-1] for p in (work / "logs").iterdir()] == ["helix"]
     elif "campaign" in block:
         (out,) = [Path(m) for m in re.findall(r"-o\s+(\S+)", block)]
