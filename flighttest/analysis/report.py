@@ -84,26 +84,52 @@ def _differs(s: pd.DataFrame, col: str, orig: str) -> bool:
 def plot_altitude(a: Analysis, out: Path) -> Path:
     """Height and descent rate over time. The height drawn is the one the descents were timed on
     (the trusted source); where the arbitration replaced or bridged the estimator's, the estimator's
-    own height (``d_est_m``, in its own datum) and vertical velocity are drawn beside it, dashed."""
+    own height (``d_est_m``, in its own datum) and vertical velocity are drawn beside it, dashed. The
+    plan, where the log has it (:func:`flighttest.analysis.planned.planned_path`), runs under both;
+    ``w`` through the disk is drawn against the guard's boundary at the flight's in-plane speed, its
+    forbidden side shaded."""
+    from flighttest.analysis.planned import planned_path
+    from flighttest.model.aero import guard_bound_mps
+    from flighttest.model.chart import GUARD_COLOUR, GUARD_SHADE, PLAN_COLOUR, VD_COLOUR, W_COLOUR, mark_ends
+
     s = a.log.state
     h = a.heights
+    plan = planned_path(a.log)
+    if plan is not None and len(s):  # the flight's time axis: a sweep stopped early does not stretch it
+        plan = plan[plan["t_s"] <= float(s["t_s"].iloc[-1])]
     estimator = a.log.heights[0].name if a.log.heights else "estimator"
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, dpi=100)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True, dpi=100)
     trusted = "altitude (−d)"
     if h is not None:
         trusted = f"height from {h.source} ({h.kind}, trusted)" + (", glitches bridged" if h.bridged.any() else "")
+    if plan is not None:
+        ax1.plot(plan["t_s"], -plan["d_m"], lw=3.0, color=PLAN_COLOUR, alpha=0.7, label="the plan")
     if _differs(s, "d_m", "d_est_m"):
         ax1.plot(s["t_s"], -s["d_est_m"], lw=1.0, ls="--", color="0.45", label=f"estimator {estimator} as logged")
     ax1.plot(s["t_s"], -s["d_m"], lw=1.2, color="tab:blue", label=trusted)
+    mark_ends(ax1, s["t_s"], -s["d_m"])
     _shade(ax1, a, label=True)
     ax1.set_ylabel("height, m (up)" if h is None or h.is_estimator else "height above home, m")
     ax1.legend(loc="best", fontsize=8)
+    if plan is not None:
+        ax2.plot(plan["t_s"], plan["vd_mps"], lw=3.0, color=PLAN_COLOUR, alpha=0.7, label="planned descent rate")
     if _differs(s, "vd_mps", "vd_est_mps"):
         ax2.plot(s["t_s"], s["vd_est_mps"], lw=0.9, ls="--", color="0.45", label="estimator vd as logged")
-    ax2.plot(s["t_s"], s["vd_mps"], lw=1.0, color="tab:blue", label="descent rate vd")
+    # wider than w, which lies on it in a straight-down descent in still air
+    ax2.plot(s["t_s"], s["vd_mps"], lw=2.4, color=VD_COLOUR, label="descent rate vd (over the ground)")
     if a.track is not None:
-        ax2.plot(a.track["t_s"], a.track["w_mps"], lw=0.8, alpha=0.7, label="w through the disk (air-relative)")
-        ax2.axhline(a.profile.w_allow_mps, color="m", ls="--", lw=1, label=f"w_allow {a.profile.w_allow_mps:.2f} m/s")
+        tr, vrs = a.track, a.profile.vrs
+        t = tr["t_s"].to_numpy(float)
+        bound = guard_bound_mps(tr["u_mps"].to_numpy(float), a.profile.w_allow_mps, vrs.cone_deg, vrs.margin_mps)
+        top = max(float(np.nanmax(tr["w_mps"])) if len(tr) else 0.0, float(np.nanmax(bound)) if len(tr) else 0.0)
+        ax2.fill_between(t, bound, top + 10.0, **GUARD_SHADE, label="guard region (w beyond the boundary)")
+        ax2.plot(t, bound, lw=1.0, color=GUARD_COLOUR,
+                 label=f"guard boundary at the flight's u (w_allow {a.profile.w_allow_mps:.2f} m/s)")  # fmt: skip
+        ax2.plot(t, tr["w_mps"], lw=1.0, color=W_COLOUR, label="w through the disk (air-relative)")
+    lo, hi = _data_limits(s["vd_mps"], *([a.track["w_mps"]] if a.track is not None else []))
+    if a.track is not None and len(a.track):
+        hi = max(hi, float(np.nanmax(bound)) + 0.25 * (hi - lo))  # the region in view
+    ax2.set_ylim(lo, hi)
     _shade(ax2, a)
     ax2.set_ylabel("m/s (down positive)")
     ax2.set_xlabel("time, s")
@@ -115,44 +141,86 @@ def plot_altitude(a: Analysis, out: Path) -> Path:
     return out
 
 
+def _data_limits(*series) -> tuple[float, float]:
+    from flighttest.model.chart import fitted_range
+
+    return fitted_range(*[np.asarray(x, float) for x in series], 0.0, min_span=0.5)
+
+
 def plot_path(a: Analysis, out: Path) -> Path:
+    """The flown path seen from above and in 3D, the plan under it where the log has it, the
+    descents bold, the flight's first and last sample marked."""
+    from flighttest.analysis.planned import planned_path
+    from flighttest.model.chart import PLAN_COLOUR, mark_ends
+
     s = a.log.state
-    fig = plt.figure(figsize=(11, 5), dpi=100)
+    plan = planned_path(a.log)
+    fig = plt.figure(figsize=(12, 5.5), dpi=100)
     ax = fig.add_subplot(1, 2, 1)
-    ax.plot(s["e_m"], s["n_m"], lw=1)
+    if plan is not None and max(np.ptp(plan["e_m"]), np.ptp(plan["n_m"])) < 0.01:  # straight down: a point
+        ax.plot(plan["e_m"].iloc[:1], plan["n_m"].iloc[:1], "P", ms=14, color=PLAN_COLOUR,
+                label="the plan (straight down)")  # fmt: skip
+    elif plan is not None:
+        ax.plot(plan["e_m"], plan["n_m"], lw=3.5, color=PLAN_COLOUR, alpha=0.7, label="the plan")
+    ax.plot(s["e_m"], s["n_m"], lw=1, color="tab:blue", label="flown")
+    mark_ends(ax, s["e_m"], s["n_m"])
     ax.set_xlabel("east, m")
     ax.set_ylabel("north, m")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title("plan view")
+    ax.set_title("seen from above")
+    ax.legend(loc="best", fontsize=8)
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
-    ax3.plot(s["e_m"], s["n_m"], -s["d_m"], lw=1)
+    if plan is not None:
+        ax3.plot(plan["e_m"], plan["n_m"], -plan["d_m"], lw=3.5, color=PLAN_COLOUR, alpha=0.7)
+    ax3.plot(s["e_m"], s["n_m"], -s["d_m"], lw=1, color="tab:blue")
     for row in a.descents.itertuples():
         sel = (s["t_s"] >= row.start_s) & (s["t_s"] <= row.end_s)
         ax3.plot(s.loc[sel, "e_m"], s.loc[sel, "n_m"], -s.loc[sel, "d_m"], lw=2.2, color="tab:orange")
+    mark_ends(ax3, s["e_m"], s["n_m"], -s["d_m"], label=False)
     ax3.set_xlabel("east, m")
     ax3.set_ylabel("north, m")
     ax3.set_zlabel("altitude, m")
-    ax3.set_title("3D path (descents bold)")
+    ax3.set_title("3D (descents bold orange)")
+    fig.suptitle(f"{a.log.name}: path")
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
     return out
 
 
+# one colour per descent, none of them the start ring's green or the end square's red
+DESCENT_COLOURS = ["tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:cyan", "tab:olive"]
+
+
 def plot_velocity_space(a: Analysis, out: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(7.5, 6.5), dpi=100)
-    tr = a.track
-    lim_H = max(2.0, float(np.nanmax(tr["v_H_n"])) * 1.1) if len(tr) else 2.0
-    lim_z = min(-1.0, float(np.nanmin(tr["v_z_n"])) * 1.1) if len(tr) else -3.0
-    draw_chart(ax, a.profile, v_H_max_n=min(lim_H, 6.0), v_z_min_n=max(lim_z, -6.0))
-    ax.plot(tr["v_H_n"], tr["v_z_n"], ".", ms=1.5, color="0.3", alpha=0.4, label="flight track")
+    """The flight's blade-frame track on the velocity-space chart, the axes fitted to it with the guard
+    region in view, each descent coloured from its start (ring) to its end (square), the plan under it."""
+    from flighttest.analysis.planned import planned_path
+    from flighttest.model.chart import PLAN_COLOUR, mark_ends, velocity_view
+
+    fig, ax = plt.subplots(figsize=(10.5, 6.5), dpi=100)
+    tr, v_h = a.track, a.profile.v_h_mps
+    plan = planned_path(a.log)
+    x_lo, x_hi, y_lo, y_hi = velocity_view(a.profile, [tr["v_H_n"]], [tr["v_z_n"]])
+    draw_chart(ax, a.profile, v_H_max_n=x_hi, v_z_min_n=y_lo, v_H_min_n=x_lo, v_z_max_n=y_hi)
+    if plan is not None:
+        ax.plot(plan["u_mps"] / v_h, -plan["w_mps"] / v_h, lw=3.0, color=PLAN_COLOUR, alpha=0.8,
+                label="the plan (still air)")  # fmt: skip
+    ax.plot(tr["v_H_n"], tr["v_z_n"], ".", ms=1.5, color="0.3", alpha=0.4)
+    ax.plot([], [], ".", ms=6, color="0.3", alpha=0.6, label="flight track")  # a legend proxy: 1.5 px dots vanish
     t = tr["t_s"].to_numpy()
-    for row in a.descents.itertuples():
+    for k, row in enumerate(a.descents.itertuples()):
         sel = (t >= row.start_s) & (t <= row.end_s)
-        ax.plot(tr["v_H_n"][sel], tr["v_z_n"][sel], ".", ms=2.5, label=f"descent {row.descent}")
-    ax.set_title(f"{a.log.name}: blade-frame track, air-relative, v_h = {a.profile.v_h_mps:.2f} m/s ({a.profile.name})"
+        x, y = tr["v_H_n"][sel].to_numpy(float), tr["v_z_n"][sel].to_numpy(float)
+        ax.plot(x, y, ".-", lw=0.8, ms=2.5, color=DESCENT_COLOURS[k % len(DESCENT_COLOURS)],
+                label=f"descent {row.descent}")  # fmt: skip
+        mark_ends(ax, x, y, label=k == 0)
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_ylim(y_lo, y_hi)
+    ax.set_title(f"{a.log.name}: blade-frame track, air-relative\nv_h = {v_h:.2f} m/s, w_allow = "
+                 f"{a.profile.w_allow_mps:.2f} m/s ({a.profile.name})"
                  + (f"\nwind {a.log.wind.describe()}" if a.log.wind is not None else ""), fontsize=9)  # fmt: skip
-    ax.legend(loc="lower left", fontsize=7, framealpha=0.9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)  # beside the chart: inside it hides the track
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)

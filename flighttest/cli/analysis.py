@@ -109,7 +109,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     pi.add_argument(
         "--write-profile",
         action="store_true",
-        help="store the onset as w_allow (with --drag: the drag model) in the user's copy of the profile",
+        help="store the onset as w_allow (with --drag: the drag model) in your copy of the profile: the first "
+        "folder of $FLIGHTTEST_VEHICLES, else ~/.config/flighttest/vehicles/ (a shipped profile stays as shipped)",
     )
     pi.add_argument("--drag", action="store_true",
                     help="identify the airframe's drag from a calibration flight (`flighttest fly drag`) instead: "
