@@ -200,8 +200,9 @@ def compare_row(
     if main is not None:  # the analysis's record of it: the same figures as analyse --json and fly --json
         if p is not None:
             row.update({k: main.get(k) for k in MAIN_FIGURES})
-        row.update(planned_descent_s=main.get("planned_descent_s"), planned_height_m=main.get("planned_height_m"),
-                   main_basis=main.get("basis"))  # fmt: skip
+        # where it started and what was planned, even for a descent the abort cut before it was one
+        row.update(start_height_m=main.get("start_height_m"), planned_descent_s=main.get("planned_descent_s"),
+                   planned_height_m=main.get("planned_height_m"), main_basis=main.get("basis"))  # fmt: skip
     row["main_descent_note"] = no_main_descent_why(descents, events)
     if events is not None and any(e.get("event") == "stream_start" for e in events):  # flighttest's own flight
         flown = flown_descent(events)
