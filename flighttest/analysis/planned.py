@@ -2,16 +2,16 @@
 
 A flighttest log folder keeps the trajectory it streamed (``trajectory.csv`` + ``trajectory.json``,
 positions relative to the plan's start) and the ``stream_start`` event with ``origin_ned``, where in the
-vehicle's local frame that start was (docs/CONTRACTS.md, "Flight log folders"). The plan is shifted
-there and onto the log's clock (events are on it already). When the heights were arbitrated onto
-another source (``state.d_est_m`` keeps the estimator's), the plan follows the trusted height's datum,
-by the offset between the two at the stream start. Any other log, or a folder without those files,
+vehicle's local frame that start was (docs/CONTRACTS.md, "Flight log folders"). The plan on the log's
+clock and in the estimator's frame is :func:`flighttest.analysis.plan_track.plan_on_log` (what the
+tracking error is measured against); for drawing beside the heights the descents were timed on, it
+follows the trusted height's datum when the heights were arbitrated onto another source
+(``state.d_est_m`` keeps the estimator's), by the offset between the two at the stream start, and
+carries its ``w``/``u`` through the disk in still air. Any other log, or a folder without those files,
 has no plan: None, never an error — a plot without it is still a plot.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 import pandas as pd
@@ -22,44 +22,37 @@ from flighttest.errors import FlighttestError
 PLANNED_COLUMNS = ["t_s", "n_m", "e_m", "d_m", "vd_mps", "w_mps", "u_mps"]
 
 
-def _stream_start(log: FlightLog) -> tuple[float, tuple[float, float, float]] | None:
-    for ev in log.events:
-        if ev.get("event") != "stream_start":
-            continue
-        origin, t = ev.get("origin_ned"), ev.get("t_s")
-        if (isinstance(origin, list) and len(origin) == 3 and isinstance(t, int | float)
-                and all(isinstance(v, int | float) and math.isfinite(v) for v in (*origin, t))):  # fmt: skip
-            return float(t), (float(origin[0]), float(origin[1]), float(origin[2]))
-    return None
-
-
 def planned_path(log: FlightLog) -> pd.DataFrame | None:
     """The flown plan on the log's clock and in its frame (``PLANNED_COLUMNS``; ``w``/``u`` in still
     air, level where the plan has no attitude), or None when the log does not say what was planned."""
+    from flighttest.analysis.plan_track import plan_on_log
     from flighttest.model.frames import blade_velocity_mps
     from flighttest.model.trajectory import Trajectory
 
-    if log.source != "flighttest-folder" or not (log.path / "trajectory.csv").is_file():
+    if log.source != "flighttest-folder":
         return None
-    start = _stream_start(log)
-    if start is None:
+    placed = plan_on_log(log)
+    if placed is None:
         return None
     try:
-        traj = Trajectory.load(log.path / "trajectory.csv")
+        traj = Trajectory.load(log.path / "trajectory.csv")  # the attitude, for w and u
     except FlighttestError:  # a damaged copy: the flight is still worth a plot
         return None
-    t0, (n0, e0, d0) = start
+    if len(traj.df) != len(placed):
+        return None
+    t0 = float(placed["t_s"].iloc[0])
+    d = placed["d_m"].to_numpy(float)
     s = log.state
     if "d_est_m" in s and len(s):
         t = s["t_s"].to_numpy(float)
         offset = (s["d_m"] - s["d_est_m"]).to_numpy(float)
         ok = np.isfinite(offset)
         if ok.any():
-            d0 += float(np.interp(t0, t[ok], offset[ok]))
+            d = d + float(np.interp(t0, t[ok], offset[ok]))
     q = traj.attitude_quat()
     q = np.tile([1.0, 0.0, 0.0, 0.0], (len(traj.df), 1)) if q is None else q
-    w, u = blade_velocity_mps(traj.column("vn_mps"), traj.column("ve_mps"), traj.column("vd_mps"), *q.T, 0.0, 0.0, 0.0)
-    return pd.DataFrame({
-        "t_s": traj.t_s + t0, "n_m": traj.column("n_m") + n0, "e_m": traj.column("e_m") + e0,
-        "d_m": traj.column("d_m") + d0, "vd_mps": traj.column("vd_mps"), "w_mps": w, "u_mps": u,
-    })  # fmt: skip
+    vn, ve, vd = (placed[c].to_numpy(float) for c in ("vn_mps", "ve_mps", "vd_mps"))
+    w, u = blade_velocity_mps(vn, ve, vd, *q.T, 0.0, 0.0, 0.0)
+    n, e = placed["n_m"].to_numpy(float), placed["e_m"].to_numpy(float)
+    return pd.DataFrame({"t_s": placed["t_s"].to_numpy(float), "n_m": n, "e_m": e, "d_m": d, "vd_mps": vd,
+                         "w_mps": w, "u_mps": u})  # fmt: skip

@@ -5,9 +5,10 @@ paper's normalised velocity-space chart (where each flight went relative to VRS 
 the wind each was judged with in its panel's title: :mod:`flighttest.analysis.wind`), one panel per
 flight with its axes fitted to that flight and the guard region in view — on one pair of axes the
 vertical baseline, whose in-plane speed stays near 0, would be a line at the origin beside the helix;
-``plot_descent_comparison`` sets the two descents side by side in time (altitude over time with the
-plan under each, and the descent times as bars with the speed-up). Both go in the README and the
-campaign report.
+``plot_descent_comparison`` sets the two descents side by side in time (altitude over time with each
+plan under it, and the descent times as bars with the planned times and the speed-up). Both go in the
+README and the campaign report. A flight's main descent is the analysis's (``compare.primary_descent``:
+for flighttest's own logs, one descent from the first setpoint until at the end height and settled).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from flighttest.analysis.compare import flown_descent, primary_descent
+from flighttest.analysis.compare import primary_descent
 from flighttest.analysis.pipeline import Analysis
 from flighttest.analysis.planned import planned_path
 from flighttest.errors import FlighttestError
@@ -39,12 +40,9 @@ def _name(a: Analysis) -> str:
 
 
 def main_descent(a: Analysis, role: str) -> pd.Series:
-    """The flight's main descent: as flown, from the stream start to the end height settled
-    (``flown_descent``), else the segmenter's (``primary_descent``, never the abort ladder's); a
-    one-line error when there is none."""
-    d = flown_descent(a.log.events)
-    if d is None:
-        d = primary_descent(a.descents, a.log.events)
+    """The flight's main descent, as ``analyse`` and ``compare`` give it (``primary_descent``: never the
+    abort ladder's); a one-line error when there is none."""
+    d = primary_descent(a.descents, a.log.events)
     if d is None:
         raise FlighttestError(f"{role} flight {_name(a)}: no descent found, nothing to compare")
     return d
@@ -164,6 +162,16 @@ def descent_profile(a: Analysis, d: pd.Series, context_s: float = CONTEXT_S) -> 
     return t[sel] - start, alt[sel] - alt_end
 
 
+def planned_profile(a: Analysis, d: pd.Series) -> tuple[np.ndarray, np.ndarray] | None:
+    """(time since the descent start, planned height above the plan's end) of the flight's plan, None
+    when the log has none or its main descent is not the planned one."""
+    if a.plan is None or not bool(d.get("main", False)):
+        return None
+    t = a.plan["t_s"].to_numpy(float) - float(d["start_s"])
+    h = -(a.plan["d_m"].to_numpy(float) - float(a.plan["d_m"].iloc[-1]))
+    return t, h
+
+
 def plot_descent_comparison(vertical: Analysis, helix: Analysis, out: Path) -> Path:
     """Altitude over time of both main descents (left) and their descent times with the speed-up (right)."""
     flights = [("vertical", vertical, "vertical baseline", VERTICAL_COLOUR), ("helix", helix, "helix", HELIX_COLOUR)]
@@ -171,13 +179,13 @@ def plot_descent_comparison(vertical: Analysis, helix: Analysis, out: Path) -> P
     durations = {role: float(d["duration_s"]) for role, d in descents.items()}
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 5), dpi=DPI, gridspec_kw={"width_ratios": [3, 2]})
 
+    planned = {role: (a.main or {}).get("planned_descent_s") for role, a, _, _ in flights}
     for role, a, label, colour in flights:
         d = descents[role]
-        plan = planned_path(a.log)
-        if plan is not None:  # the plan under the flight, from the same start, relative to its own end
-            ax1.plot(plan["t_s"] - float(d["start_s"]), plan["d_m"].iloc[-1] - plan["d_m"], "--", lw=1.2,
-                     color=colour, alpha=0.55, label=f"{label}: its plan")  # fmt: skip
         t, h = descent_profile(a, d)
+        plan = planned_profile(a, d)
+        if plan is not None:
+            ax1.plot(*plan, "--", lw=1.4, color=colour, alpha=0.45, label=f"{label}, planned")
         ax1.plot(t, h, "-", lw=1.8, color=colour, label=f"{label} ({_name(a)})")
         ax1.axvline(durations[role], color=colour, ls="--", lw=1)
         fin = np.isfinite(h)
@@ -213,9 +221,15 @@ def plot_descent_comparison(vertical: Analysis, helix: Analysis, out: Path) -> P
             fontsize=12,
             fontweight="bold",
         )
+    plans = [planned[role] for role, _, _, _ in flights]
+    for k, v in enumerate(plans):
+        if isinstance(v, int | float):  # the plan's time by the same rule: what flying it exactly takes
+            ax2.plot([v, v], [k - 0.38, k + 0.38], "-", color=PLAN_COLOUR, lw=3)
+            ax2.annotate(f"planned {v:.2f} s", (v, k - 0.38), xytext=(3, 2), textcoords="offset points",
+                         fontsize=8, color="0.3", va="bottom")  # fmt: skip
     ax2.invert_yaxis()  # the baseline on top, as on the left
-    ax2.set_xlabel("descent time, s")
-    ax2.set_xlim(0, 1.1 * max(values))
+    ax2.set_xlabel("descent time, s (grey: planned)")
+    ax2.set_xlim(0, 1.15 * max([*values, *(v for v in plans if isinstance(v, int | float))]))
     speedup = values[0] / values[1] if values[1] > 0 else float("nan")
     ax2.set_title(f"descent time: helix speed-up {speedup:.2f}× (vertical / helix)")
     ax2.grid(axis="x", alpha=0.3)

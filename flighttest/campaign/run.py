@@ -117,8 +117,9 @@ def step_brief(step: str, outputs: dict[str, Any]) -> str:
     """The one line after a step's tick: what it found or flew and where it wrote it."""
     o = outputs
     if step in FLIGHT_STEPS:
-        d = o.get("descent_time_s")
-        return f"{o['outcome']}" + (f", descent {d:.2f} s" if d else "") + f"; log {o['log_dir']}"
+        d, plan = o.get("descent_time_s"), o.get("planned_descent_s")
+        planned = f" (planned {plan:.2f} s)" if isinstance(plan, int | float) else ""
+        return f"{o['outcome']}" + (f", descent {d:.2f} s{planned}" if d else "") + f"; log {o['log_dir']}"
     if step == "identify":
         if o.get("onset_found") is False:
             return f"{o['message']} → {o['profile']}"
