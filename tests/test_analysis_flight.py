@@ -7,15 +7,16 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
 import pytest
 
+from flighttest.analysis import descent_time
 from flighttest.analysis.compare import primary_descent
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
-from flighttest.analysis.segment import find_descents
 from flighttest.model.profiles import load_profile
 
 pytestmark = pytest.mark.flight
@@ -69,17 +70,19 @@ def test_flown_log_matches_truth(fake_vehicle_factory, tmp_path, mission):
     a = analyse(load_log(folder))  # the vehicle comes from meta.json
     assert a.profile is not None and a.profile.name == "x500"
     main = primary_descent(a.descents)
-    assert main is not None and main["mission"] == mission and main["phase"] == "stream"
+    assert main is not None and main["mission"] == mission and main["phase"] == "stream" and main["main"]
 
     truth = truth_state(fake.truth_log, float(a.log.state["unix_s"].iloc[0]))
-    t_desc, _ = find_descents(truth)
-    # the same descent in the truth: the one that overlaps ours
-    tm = t_desc.iloc[(t_desc["start_s"] - main["start_s"]).abs().argmin()]
-    assert main["start_s"] == pytest.approx(tm["start_s"], abs=0.06)
-    assert main["duration_s"] == pytest.approx(tm["duration_s"], abs=0.08)
-    assert main["height_m"] == pytest.approx(tm["height_m"], abs=0.03)
-    assert main["max_rate_mps"] == pytest.approx(tm["max_rate_mps"], abs=0.05)
-    assert main["horizontal_excursion_m"] == pytest.approx(tm["horizontal_excursion_m"], abs=0.1)
+    # the same descent in the truth: the same rule from the same events, on the truth's samples
+    tm = descent_time.from_log(SimpleNamespace(events=a.log.events, state=truth, path=folder)).flown
+    assert tm is not None and tm.reached is not None
+    assert main["start_s"] == pytest.approx(tm.start_s, abs=1e-9)
+    assert main["duration_s"] == pytest.approx(tm.duration_s, abs=0.08)
+    assert main["height_m"] == pytest.approx(tm.height_m, abs=0.03)
+    assert main["max_rate_mps"] == pytest.approx(tm.max_rate_mps, abs=0.05)
+    sel = (truth["t_s"] >= tm.start_s) & (truth["t_s"] <= tm.end_s)
+    n, e = truth.loc[sel, "n_m"].to_numpy(), truth.loc[sel, "e_m"].to_numpy()
+    assert main["horizontal_excursion_m"] == pytest.approx(np.hypot(n - n[0], e - e[0]).max(), abs=0.1)
 
     # exposure: the truth's own blade-frame w, u through the same guard region
     region = load_profile("x500").guard_region()

@@ -179,7 +179,9 @@ def test_report_names_the_sources_and_draws_both_heights(tmp_path, monkeypatch):
     md = "\n".join(report.heights_section(exc))
     assert "### Height sources" in md and "### Estimator glitches (1)" in md
     row = next(line for line in md.splitlines() if "| disagreement |" in line)
-    assert f"`{estimator}` -7.50" in row and f"`{baro}` -0.0" in row
+    assert row.startswith("| 1 |") and f"`{estimator}`" in row and len(row) <= 80  # the table fits 80 columns
+    said = next(line for line in md.splitlines() if line.startswith("- glitch 1, what each source said"))
+    assert f"`{estimator}` -7.50" in said and f"`{baro}` -0.0" in said
 
     figures = []
     monkeypatch.setattr(report.plt, "close", figures.append)
@@ -242,7 +244,10 @@ def test_ardupilot_34_hard_landing_is_the_barometers_fall(tmp_path, capsys):
     d = _analyse_json(path, capsys)
     origin = float(load_log(path).state["boot_s"].iloc[0]) - 5.0  # write_tlog's boot clock starts at 5 s
     x = _assert_hard_landing(d, FALL_T0 - origin, (1.5, 4.5))  # the 2 s fall less the segmentation's tolerances
-    assert x["max_rate_mps"] == pytest.approx(math.pi * 9.0 / 4.0, abs=0.3)
+    # the height's own fastest fall over 0.2 s: the fall's π·9/4 m/s, plus the estimator's error growing at
+    # 0.2 m/s through it and the 10 Hz samples' noise over two intervals
+    assert x["max_rate_mps"] == pytest.approx(math.pi * 9.0 / 4.0, abs=0.5)
+    assert x["mean_rate_mps"] <= x["max_rate_mps"]
     (g,) = [g for g in d["glitches"] if g["kind"] == "disagreement"]
     assert g["start_s"] + origin == pytest.approx(FALL_T0 + 1.0, abs=1.5)  # the run-on, from the fall
     assert FALL_T0 + 43.0 < g["end_s"] + origin < FALL_T0 + 50.0  # ... to where the estimator is back

@@ -223,6 +223,16 @@ def test_the_runner_times_the_descent_with_the_same_rule(tmp_path):
     assert runner.watch.horizontal_error_m == pytest.approx(want.horizontal_error_m)
     s = runner._outcome("completed", None).summary()
     assert s["descent_time_s"] == runner.descent_time_s and s["horizontal_error_m"] == runner.watch.horizontal_error_m
+    # the main descent as the analysis gives it: the same rule's figures, the plan timed alike beside them
+    m = s["main_descent"]
+    assert m["basis"] == "planned descent" and m["reached"] and m["descent_time_s"] == round(want.descent_time_s, 3)
+    assert m["height_m"] == pytest.approx(3.0, abs=0.2) and m["mean_rate_mps"] == pytest.approx(
+        m["height_m"] / m["descent_time_s"], abs=1e-3)  # fmt: skip
+    assert m["max_rate_mps"] is None  # arrival times jitter: the analysis gives it on the vehicle's clock
+    df = runner.traj.df
+    plan = dt.planned_descent(df["t_s"], df["n_m"], df["e_m"], df["d_m"], df["vd_mps"])
+    assert s["planned_descent_s"] == m["planned_descent_s"] == round(plan.descent_time_s, 3)
+    assert m["planned_height_m"] == pytest.approx(3.0)
     ev = [x for x in _events_of(runner) if x["event"] == "descent_reached"]
     assert len(ev) == 1 and ev[0]["horizontal_error_m"] == round(want.horizontal_error_m, 3)
 

@@ -117,13 +117,19 @@ def _analysis(name, params, source="params.json"):
 
 
 def test_report_parameter_sections():
-    md = "\n".join(params_section(_analysis("a", PX4)))
-    assert "### Parameters (7, from params.json)" in md and "`MPC_Z_VEL_MAX_DN` | 1.5" in md
+    md = "\n".join(params_section([_analysis("a", PX4)]))
+    assert "- 1: 7 that shape these tests from params.json" in md and "`MPC_Z_VEL_MAX_DN` | 1.5" in md
     assert "SYS_AUTOSTART" not in md
     rows = [line for line in md.splitlines() if line.startswith("| `")]
-    assert len(rows) == 3  # 7 parameters, three pairs per line
-    assert "None in the log." in params_section(_analysis("b", {}, None))
+    assert len(rows) == 4  # 7 parameters, two pairs per line (80 columns)
+    assert "- 1: none in the log" in params_section([_analysis("b", {}, None)])
     other = {**PX4, "MPC_Z_VEL_MAX_DN": 2.0}
+    # the report lists the parameters once: those the flights share, then those that differ side by side
+    md = "\n".join(params_section([_analysis("a", PX4), _analysis("b", other)]))
+    shared, differ = md.split("### Parameters that differ")
+    assert "### The same in every flight that carries parameters (6)" in shared and "MPC_Z_VEL_MAX_DN" not in shared
+    assert "| `MPC_Z_VEL_MAX_DN` | 1.5 | 2 |" in differ and "MC_ROLL_P" not in differ
+    assert all(len(line) <= 80 for line in md.splitlines() if line.startswith("|"))
     md = "\n".join(param_differences_section([_analysis("a", PX4), _analysis("b", other)], ["a", "b"]))
     assert "| `MPC_Z_VEL_MAX_DN` | 1.5 | 2 |" in md and "MC_ROLL_P" not in md
     md = "\n".join(param_differences_section([_analysis("a", PX4), _analysis("b", {})], ["a", "b"]))

@@ -18,6 +18,11 @@ disarmed on the ground, was a "descent" only the ``.ulg`` (which starts at boot)
 
 Both logs must also name a trusted estimator height with no glitches and an attitude from the
 autopilot's own attitude estimate, each in its log's own terms.
+
+A flighttest flight's main descent is timed from its events (the stream start, the abort, the
+phases: ``flighttest.analysis.descent_time``), which only our folder carries. The autopilot's log is
+given the folder's events on its own clock (through the boot clock, :func:`_with_events_of`), so
+the main descent too must come out the same whatever the sampling.
 """
 
 from __future__ import annotations
@@ -79,8 +84,30 @@ class _Pairs:
                 shutil.copyfileobj(src, dst, 1 << 20)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                self.cache[name] = (analyse(load_log(own)), analyse(load_log(folder)))
+                ours = analyse(load_log(folder))
+                self.cache[name] = (analyse(_with_events_of(load_log(own), ours)), ours)
         return self.cache[name]
+
+
+def _with_events_of(log, folder: Analysis):
+    """``log`` (the autopilot's own) with the flight's events from our folder, their times moved onto
+    ``log``'s clock through the boot clock, and the descent's end point written out (older folders
+    keep it only in their ``trajectory.csv``)."""
+    from flighttest.analysis.descent_time import trajectory_end_m
+
+    s, o = folder.log.state, log.state
+    events = []
+    for e in folder.log.events:
+        if e.get("event") not in ("stream_start", "phase", "abort") or not isinstance(e.get("t_s"), float | int):
+            continue
+        boot = np.interp(e["t_s"], s["t_s"].to_numpy(float), s["boot_s"].to_numpy(float))
+        e = {**e, "t_s": float(np.interp(boot, o["boot_s"].to_numpy(float), o["t_s"].to_numpy(float)))}
+        if e["event"] == "stream_start" and e.get("end_ned") is None:
+            rel = trajectory_end_m(folder.log.path)
+            e["end_ned"] = [a + b for a, b in zip(e["origin_ned"], rel)] if rel is not None else None
+        events.append(e)
+    log.events = events
+    return log
 
 
 @pytest.fixture(scope="module")

@@ -71,13 +71,13 @@ def find_logs(root: Path) -> tuple[list[Path], list[str]]:
     return found, skipped
 
 
-def _one(args: tuple[str, str | None, SegmentConfig | None]) -> tuple[str, dict | None, str | None]:
-    path, vehicle, seg = args
+def _one(args: tuple[str, str | None, SegmentConfig | None, bool]) -> tuple[str, dict | None, str | None]:
+    path, vehicle, seg, profile_now = args
     from flighttest.analysis.pipeline import analyse_path
 
     try:
         with quiet_numerics():
-            a = analyse_path(path, vehicle, seg)
+            a = analyse_path(path, vehicle, seg, profile_now)
             result = {"summary": a.summary(), "descents": a.descents, "events": a.log.events, "meta": a.log.meta}
     except FlighttestError as exc:
         return path, None, str(exc)
@@ -88,10 +88,12 @@ def _one(args: tuple[str, str | None, SegmentConfig | None]) -> tuple[str, dict 
 
 
 def analyse_many(
-    paths: list[Path], vehicle: str | None, seg: SegmentConfig | None = None, workers: int | None = None
+    paths: list[Path], vehicle: str | None, seg: SegmentConfig | None = None, workers: int | None = None,
+    profile_now: bool = False,
 ) -> list[tuple[str, dict | None, str | None]]:
-    """(path, {"summary", "descents", "events", "meta"} or None, error or None) per log, in input order."""
-    jobs = [(str(p), vehicle, seg) for p in paths]
+    """(path, {"summary", "descents", "events", "meta"} or None, error or None) per log, in input order;
+    ``profile_now``: judge each flight with its vehicle's profile as it is today, not as it flew."""
+    jobs = [(str(p), vehicle, seg, profile_now) for p in paths]
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs), MAX_JOBS))
     if workers == 1:
         return [_one(j) for j in jobs]

@@ -1,12 +1,21 @@
 """PNG plots (matplotlib Agg) and a Markdown summary that embeds them, one section per log.
 
-Per log: which height the descents were timed on (the arbitration's verdict on every height source,
+The report opens with every flight at a glance (outcome, descent time against the plan's, the main
+descent) and what each column means (``flighttest.analysis.legend``), and ends with the parameters,
+once: the ones every flight shared, then those that differ, side by side. Every table fits 80
+columns (``MAX_TABLE_WIDTH``): long names go into numbered lists, wide tables are split.
+
+Per log: how it ended and why, its main descent and the plan's time for it, which profile judged it,
+which height the descents were timed on (the arbitration's verdict on every height source,
 :mod:`flighttest.analysis.heights`), the attitude source, the estimator glitches with what each
 height source said; altitude and descent rate over time (descents shaded, glitch spans marked with
 their kind, the estimator's own height drawn beside the trusted one where they differ), the path in
-plan view and 3D, the velocity-space chart (paper Fig. 5/8: VRS/TWS/WBS regions, the cone, the guard
-boundary) with the flight's normalised air-relative blade-frame track (the wind it was judged with in its
-title and in the log's bullets: :mod:`flighttest.analysis.wind`), and the probe plot: the sweep alone, its
+plan view and 3D, with the plan under the flown path and speeds where the log has one
+(``flighttest.analysis.planned``) and the tracking error over time (``flighttest.analysis.plan_track``),
+the start and end of each track marked, ``w`` against the guard's boundary, the velocity-space chart
+(paper Fig. 5/8: VRS/TWS/WBS regions, the cone, the guard boundary) with the flight's normalised
+air-relative blade-frame track (the wind it was judged with in its title and in the log's bullets:
+:mod:`flighttest.analysis.wind`), and the probe plot: the sweep alone, its
 RMS fluctuation × hover binned over descent speed, with the hover level, the detector's threshold
 and the identified onset with its band (:func:`draw_fluctuation`).
 """
@@ -24,27 +33,40 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from flighttest.analysis import legend
 from flighttest.analysis.pipeline import Analysis
 from flighttest.errors import FlighttestError
 from flighttest.inputs import display_path
-from flighttest.model.chart import draw_chart
+from flighttest.model.chart import PLAN_COLOUR, draw_chart
 
-TABLE_COLUMNS = {
+MAX_TABLE_WIDTH = 80  # every Markdown table line, so report.md reads in a terminal as well as rendered
+# the per-descent table in three parts that each fit MAX_TABLE_WIDTH: when and how fast, the guard
+# region, then sideways, wind and shaking
+TIMING_COLUMNS = {
     "descent": "#",
+    "phase": "phase",
     "start_s": "start s",
     "duration_s": "duration s",
     "height_m": "height m",
     "mean_rate_mps": "mean m/s",
     "max_rate_mps": "max m/s",
-    "horizontal_excursion_m": "horiz. m",
+}
+EXPOSURE_TABLE_COLUMNS = {
+    "descent": "#",
     "time_inside_s": "inside s",
     "time_inside_worst_s": "inside, worst air s",
     "time_near_s": "near s",
     "min_margin_mps": "min margin m/s",
+}
+CONTEXT_COLUMNS = {
+    "descent": "#",
+    "horizontal_excursion_m": "horiz. m",
     "wind_speed_mps": "wind m/s",
     "fluct_index_max": "fluct. max",
-    "phase": "phase",
 }
+DESCENT_TABLES = (("When and how fast", TIMING_COLUMNS), ("The guard region", EXPOSURE_TABLE_COLUMNS),
+                  ("Sideways, wind, shaking", CONTEXT_COLUMNS))  # fmt: skip
+TABLE_COLUMNS = {**TIMING_COLUMNS, **EXPOSURE_TABLE_COLUMNS, **CONTEXT_COLUMNS}
 
 
 def _slug(name: str) -> str:
@@ -84,27 +106,55 @@ def _differs(s: pd.DataFrame, col: str, orig: str) -> bool:
 def plot_altitude(a: Analysis, out: Path) -> Path:
     """Height and descent rate over time. The height drawn is the one the descents were timed on
     (the trusted source); where the arbitration replaced or bridged the estimator's, the estimator's
-    own height (``d_est_m``, in its own datum) and vertical velocity are drawn beside it, dashed."""
+    own height (``d_est_m``, in its own datum) and vertical velocity are drawn beside it, dashed. The
+    plan, where the log has it (:func:`flighttest.analysis.planned.planned_path`), runs under both;
+    ``w`` through the disk is drawn against the guard's boundary at the flight's in-plane speed, its
+    forbidden side shaded."""
+    from flighttest.analysis.planned import planned_path
+    from flighttest.model.aero import guard_bound_mps
+    from flighttest.model.chart import GUARD_COLOUR, GUARD_SHADE, VD_COLOUR, W_COLOUR, mark_ends
+
     s = a.log.state
     h = a.heights
+    plan = planned_path(a.log)
+    if plan is not None and len(s):  # the flight's time axis: a sweep stopped early does not stretch it
+        plan = plan[plan["t_s"] <= float(s["t_s"].iloc[-1])]
     estimator = a.log.heights[0].name if a.log.heights else "estimator"
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, dpi=100)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 7), sharex=True, dpi=100)
     trusted = "altitude (−d)"
     if h is not None:
         trusted = f"height from {h.source} ({h.kind}, trusted)" + (", glitches bridged" if h.bridged.any() else "")
+    if plan is not None:
+        ax1.plot(plan["t_s"], -plan["d_m"], lw=3.0, color=PLAN_COLOUR, alpha=0.7, label="the plan")
     if _differs(s, "d_m", "d_est_m"):
         ax1.plot(s["t_s"], -s["d_est_m"], lw=1.0, ls="--", color="0.45", label=f"estimator {estimator} as logged")
     ax1.plot(s["t_s"], -s["d_m"], lw=1.2, color="tab:blue", label=trusted)
+    mark_ends(ax1, s["t_s"], -s["d_m"])
     _shade(ax1, a, label=True)
+    _mark_ends(ax1, a)
     ax1.set_ylabel("height, m (up)" if h is None or h.is_estimator else "height above home, m")
     ax1.legend(loc="best", fontsize=8)
+    if plan is not None:
+        ax2.plot(plan["t_s"], plan["vd_mps"], lw=3.0, color=PLAN_COLOUR, alpha=0.7, label="planned descent rate")
     if _differs(s, "vd_mps", "vd_est_mps"):
         ax2.plot(s["t_s"], s["vd_est_mps"], lw=0.9, ls="--", color="0.45", label="estimator vd as logged")
-    ax2.plot(s["t_s"], s["vd_mps"], lw=1.0, color="tab:blue", label="descent rate vd")
+    # wider than w, which lies on it in a straight-down descent in still air
+    ax2.plot(s["t_s"], s["vd_mps"], lw=2.4, color=VD_COLOUR, label="descent rate vd (over the ground)")
     if a.track is not None:
-        ax2.plot(a.track["t_s"], a.track["w_mps"], lw=0.8, alpha=0.7, label="w through the disk (air-relative)")
-        ax2.axhline(a.profile.w_allow_mps, color="m", ls="--", lw=1, label=f"w_allow {a.profile.w_allow_mps:.2f} m/s")
+        tr, vrs = a.track, a.profile.vrs
+        t = tr["t_s"].to_numpy(float)
+        bound = guard_bound_mps(tr["u_mps"].to_numpy(float), a.profile.w_allow_mps, vrs.cone_deg, vrs.margin_mps)
+        top = max(float(np.nanmax(tr["w_mps"])) if len(tr) else 0.0, float(np.nanmax(bound)) if len(tr) else 0.0)
+        ax2.fill_between(t, bound, top + 10.0, **GUARD_SHADE, label="guard region (w beyond the boundary)")
+        ax2.plot(t, bound, lw=1.0, color=GUARD_COLOUR,
+                 label=f"guard boundary at the flight's u (w_allow {a.profile.w_allow_mps:.2f} m/s)")  # fmt: skip
+        ax2.plot(t, tr["w_mps"], lw=1.0, color=W_COLOUR, label="w through the disk (air-relative)")
+    lo, hi = _data_limits(s["vd_mps"], *([a.track["w_mps"]] if a.track is not None else []))
+    if a.track is not None and len(a.track):
+        hi = max(hi, float(np.nanmax(bound)) + 0.25 * (hi - lo))  # the region in view
+    ax2.set_ylim(lo, hi)
     _shade(ax2, a)
+    _mark_ends(ax2, a, label=False)
     ax2.set_ylabel("m/s (down positive)")
     ax2.set_xlabel("time, s")
     ax2.legend(loc="best", fontsize=8)
@@ -115,44 +165,136 @@ def plot_altitude(a: Analysis, out: Path) -> Path:
     return out
 
 
-def plot_path(a: Analysis, out: Path) -> Path:
-    s = a.log.state
-    fig = plt.figure(figsize=(11, 5), dpi=100)
-    ax = fig.add_subplot(1, 2, 1)
-    ax.plot(s["e_m"], s["n_m"], lw=1)
-    ax.set_xlabel("east, m")
-    ax.set_ylabel("north, m")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title("plan view")
-    ax3 = fig.add_subplot(1, 2, 2, projection="3d")
-    ax3.plot(s["e_m"], s["n_m"], -s["d_m"], lw=1)
-    for row in a.descents.itertuples():
-        sel = (s["t_s"] >= row.start_s) & (s["t_s"] <= row.end_s)
-        ax3.plot(s.loc[sel, "e_m"], s.loc[sel, "n_m"], -s.loc[sel, "d_m"], lw=2.2, color="tab:orange")
-    ax3.set_xlabel("east, m")
-    ax3.set_ylabel("north, m")
-    ax3.set_zlabel("altitude, m")
-    ax3.set_title("3D path (descents bold)")
+def _data_limits(*series) -> tuple[float, float]:
+    from flighttest.model.chart import fitted_range
+
+    return fitted_range(*[np.asarray(x, float) for x in series], 0.0, min_span=0.5)
+
+
+def ends(a: Analysis) -> dict[str, float]:
+    """When the main descent began, ended as flown, and would have ended as planned (log clock)."""
+    m = a.main or {}
+    out = {}
+    start, flown, planned = m.get("start_s"), m.get("descent_time_s"), m.get("planned_descent_s")
+    if isinstance(start, int | float) and m.get("basis") == "planned descent":
+        out["start"] = float(start)
+        if isinstance(flown, int | float):
+            out["flown"] = float(start) + float(flown)
+        if isinstance(planned, int | float):
+            out["planned"] = float(start) + float(planned)
+    return out
+
+
+# the flown end's line: not green (the start ring, the descent rate) nor red (the end square, the guard region)
+FLOWN_END_COLOUR = "tab:purple"
+
+
+def _mark_ends(ax, a: Analysis, label: bool = True) -> None:
+    """The main descent's end as planned (dashed grey) and as flown (solid purple), with their times."""
+    e, m = ends(a), a.main or {}
+    lines = (("planned", "planned_descent_s", "--", PLAN_COLOUR, "planned end"),
+             ("flown", "descent_time_s", "-", FLOWN_END_COLOUR, "flown end"))  # fmt: skip
+    for key, dur_key, style, colour, text in lines:
+        if key in e:
+            ax.axvline(e[key], color=colour, ls=style, lw=1.2,
+                       label=f"{text}, {m[dur_key]:.2f} s after the first setpoint" if label else None)  # fmt: skip
+
+
+def plot_tracking(a: Analysis, out: Path) -> Path:
+    """Flown minus planned position over the descent (``plan_track.tracking_error``): how far off the plan,
+    sideways and vertically, and when the descent was planned and flown to end."""
+    err = a.tracking
+    fig, ax = plt.subplots(figsize=(9, 4), dpi=100)
+    ax.plot(err["t_s"], err["total_m"], lw=1.4, color="black", label="total")
+    ax.plot(err["t_s"], err["horizontal_m"], lw=1.0, color="tab:blue", label="sideways (horizontal)")
+    ax.plot(err["t_s"], err["down_m"], lw=1.0, color="tab:orange", label="vertical (+: below the plan)")
+    ax.axhline(0.0, color="0.6", lw=0.8)
+    _mark_ends(ax, a)
+    ax.set_xlabel("time, s")
+    ax.set_ylabel("flown − planned position, m")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"{a.log.name}: tracking error against the plan (the estimate's position)")
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
     return out
 
 
-def plot_velocity_space(a: Analysis, out: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(7.5, 6.5), dpi=100)
-    tr = a.track
-    lim_H = max(2.0, float(np.nanmax(tr["v_H_n"])) * 1.1) if len(tr) else 2.0
-    lim_z = min(-1.0, float(np.nanmin(tr["v_z_n"])) * 1.1) if len(tr) else -3.0
-    draw_chart(ax, a.profile, v_H_max_n=min(lim_H, 6.0), v_z_min_n=max(lim_z, -6.0))
-    ax.plot(tr["v_H_n"], tr["v_z_n"], ".", ms=1.5, color="0.3", alpha=0.4, label="flight track")
-    t = tr["t_s"].to_numpy()
+def plot_path(a: Analysis, out: Path) -> Path:
+    """The flown path seen from above and in 3D, the plan under it where the log has it, the
+    descents bold, the flight's first and last sample marked."""
+    from flighttest.analysis.planned import planned_path
+    from flighttest.model.chart import mark_ends
+
+    s = a.log.state
+    plan = planned_path(a.log)
+    fig = plt.figure(figsize=(12, 5.5), dpi=100)
+    ax = fig.add_subplot(1, 2, 1)
+    if plan is not None and max(np.ptp(plan["e_m"]), np.ptp(plan["n_m"])) < 0.01:  # straight down: a point
+        ax.plot(plan["e_m"].iloc[:1], plan["n_m"].iloc[:1], "P", ms=14, color=PLAN_COLOUR,
+                label="the plan (straight down)")  # fmt: skip
+    elif plan is not None:
+        ax.plot(plan["e_m"], plan["n_m"], lw=3.5, color=PLAN_COLOUR, alpha=0.7, label="the plan")
+    ax.plot(s["e_m"], s["n_m"], lw=1, color="tab:blue", label="flown")
+    mark_ends(ax, s["e_m"], s["n_m"])
+    ax.set_xlabel("east, m")
+    ax.set_ylabel("north, m")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title("seen from above")
+    ax.legend(loc="best", fontsize=8)
+    ax3 = fig.add_subplot(1, 2, 2, projection="3d")
+    if plan is not None:
+        ax3.plot(plan["e_m"], plan["n_m"], -plan["d_m"], lw=3.5, color=PLAN_COLOUR, alpha=0.7)
+    ax3.plot(s["e_m"], s["n_m"], -s["d_m"], lw=1, color="tab:blue")
     for row in a.descents.itertuples():
+        sel = (s["t_s"] >= row.start_s) & (s["t_s"] <= row.end_s)
+        ax3.plot(s.loc[sel, "e_m"], s.loc[sel, "n_m"], -s.loc[sel, "d_m"], lw=2.2, color="tab:orange")
+    mark_ends(ax3, s["e_m"], s["n_m"], -s["d_m"], label=False)
+    ax3.set_xlabel("east, m")
+    ax3.set_ylabel("north, m")
+    ax3.set_zlabel("altitude, m")
+    ax3.set_title("3D (descents bold orange)")
+    fig.suptitle(f"{a.log.name}: path")
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+# one colour per descent, none of them the start ring's green or the end square's red
+DESCENT_COLOURS = ["tab:blue", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:cyan", "tab:olive"]
+
+
+def plot_velocity_space(a: Analysis, out: Path) -> Path:
+    """The flight's blade-frame track on the velocity-space chart, the axes fitted to it with the guard
+    region in view, each descent coloured from its start (ring) to its end (square), the plan under it."""
+    from flighttest.analysis.planned import planned_path
+    from flighttest.model.chart import mark_ends, velocity_view
+
+    fig, ax = plt.subplots(figsize=(10.5, 6.5), dpi=100)
+    tr, v_h = a.track, a.profile.v_h_mps
+    plan = planned_path(a.log)
+    x_lo, x_hi, y_lo, y_hi = velocity_view(a.profile, [tr["v_H_n"]], [tr["v_z_n"]])
+    draw_chart(ax, a.profile, v_H_max_n=x_hi, v_z_min_n=y_lo, v_H_min_n=x_lo, v_z_max_n=y_hi)
+    if plan is not None:
+        ax.plot(plan["u_mps"] / v_h, -plan["w_mps"] / v_h, lw=3.0, color=PLAN_COLOUR, alpha=0.8,
+                label="the plan (still air)")  # fmt: skip
+    ax.plot(tr["v_H_n"], tr["v_z_n"], ".", ms=1.5, color="0.3", alpha=0.4)
+    ax.plot([], [], ".", ms=6, color="0.3", alpha=0.6, label="flight track")  # a legend proxy: 1.5 px dots vanish
+    t = tr["t_s"].to_numpy()
+    for k, row in enumerate(a.descents.itertuples()):
         sel = (t >= row.start_s) & (t <= row.end_s)
-        ax.plot(tr["v_H_n"][sel], tr["v_z_n"][sel], ".", ms=2.5, label=f"descent {row.descent}")
-    ax.set_title(f"{a.log.name}: blade-frame track, air-relative, v_h = {a.profile.v_h_mps:.2f} m/s ({a.profile.name})"
+        x, y = tr["v_H_n"][sel].to_numpy(float), tr["v_z_n"][sel].to_numpy(float)
+        ax.plot(x, y, ".-", lw=0.8, ms=2.5, color=DESCENT_COLOURS[k % len(DESCENT_COLOURS)],
+                label=f"descent {row.descent}")  # fmt: skip
+        mark_ends(ax, x, y, label=k == 0)
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_ylim(y_lo, y_hi)
+    ax.set_title(f"{a.log.name}: blade-frame track, air-relative\nv_h = {v_h:.2f} m/s, w_allow = "
+                 f"{a.profile.w_allow_mps:.2f} m/s ({a.profile.name})"
                  + (f"\nwind {a.log.wind.describe()}" if a.log.wind is not None else ""), fontsize=9)  # fmt: skip
-    ax.legend(loc="lower left", fontsize=7, framealpha=0.9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)  # beside the chart: inside it hides the track
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
@@ -334,13 +476,17 @@ def markdown_table(df: pd.DataFrame, columns: dict[str, str]) -> str:
     cols = [c for c in columns if c in df]
     lines = ["| " + " | ".join(columns[c] for c in cols) + " |", "|" + "---|" * len(cols)]
     for row in df[cols].itertuples(index=False):
-        lines.append("| " + " | ".join(_fmt(v) for v in row) + " |")
+        cells = []
+        for c, v in zip(cols, row):
+            main = c == "descent" and "main" in df and bool(df.loc[df["descent"] == v, "main"].any())
+            cells.append(f"{v}{legend.MAIN_MARK}" if main else _fmt(v))
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def params_markdown(params: dict, pairs_per_row: int = 3) -> str:
-    """The relevant parameters of one flight as a compact table: name/value pairs side by side, so
-    ArduPilot's hundred ATC_* gains take a third of the lines."""
+def params_markdown(params: dict, pairs_per_row: int = 2) -> str:
+    """Parameters as a compact table: name/value pairs side by side (two pairs fit 80 columns), so
+    ArduPilot's hundred ATC_* gains take half the lines."""
     from flighttest.analysis.params import format_value
 
     items = [(f"`{k}`", format_value(v)) for k, v in params.items()]
@@ -352,50 +498,65 @@ def params_markdown(params: dict, pairs_per_row: int = 3) -> str:
     return "\n".join(lines)
 
 
-def params_section(a: Analysis) -> list[str]:
-    """Markdown lines: the parameters of ``a``'s flight that shape these tests, or why there are none."""
-    from flighttest.analysis.params import relevant
+def params_section(analyses: list[Analysis], labels: list[str] | None = None) -> list[str]:
+    """Markdown lines: the parameters that shape these tests, once for the whole report: where each
+    flight's came from, those every flight carrying parameters shared, then those that differ, one
+    column per flight (``labels``, numbered like the report's flights)."""
+    from flighttest.analysis.params import differences, relevant
 
-    rel = relevant(a.log.params)
-    src = f", from {a.log.params_source}" if a.log.params_source else ""
-    if not rel:
-        why = (
-            "None in the log."
-            if not a.log.params
-            else f"None of the log's {len(a.log.params)} parameters is one that shapes these tests "
-            "(flighttest.analysis.params.RELEVANT)."
-        )
-        return [f"### Parameters{src}", "", why, ""]
-    return [f"### Parameters ({len(rel)}{src})", "", params_markdown(rel), ""]
+    labels = labels or [str(i) for i in range(1, len(analyses) + 1)]
+    snaps = [relevant(a.log.params) for a in analyses]
+    md = ["## Parameters", ""]
+    for label, a, snap in zip(labels, analyses, snaps):
+        src = f" from {a.log.params_source}" if a.log.params_source else ""
+        if snap:
+            md.append(f"- {label}: {len(snap)} that shape these tests{src}")
+        elif a.log.params:
+            md.append(f"- {label}: none of the log's {len(a.log.params)} parameters is one that shapes these tests")
+        else:
+            md.append(f"- {label}: none in the log")
+    md.append("")
+    carrying = [snap for snap in snaps if snap]
+    if not carrying:
+        return md
+    diff = differences(snaps) if len(carrying) > 1 else {}
+    shared = {k: v for k, v in carrying[0].items() if k not in diff and all(k in snap for snap in carrying)}
+    if shared:
+        every = "every flight that carries parameters" if len(carrying) > 1 else "the flight"
+        md += [f"### The same in {every} ({len(shared)})", "", params_markdown(shared), ""]
+    if len(carrying) > 1:
+        md += param_differences_section(analyses, labels)
+    return md
 
 
 def param_differences_section(analyses: list[Analysis], names: list[str]) -> list[str]:
-    """Markdown lines: the relevant parameters not the same in every flight of the report."""
+    """Markdown lines: the relevant parameters not the same in every flight of the report, one column
+    per flight (``names``: short labels), split into tables that each fit ``MAX_TABLE_WIDTH``."""
     from flighttest.analysis.params import differences, format_value, relevant
 
     snaps = [relevant(a.log.params) for a in analyses]
-    md = ["## Parameters that differ between these flights", ""]
+    md = ["### Parameters that differ between these flights", ""]
     with_params = sum(bool(s) for s in snaps)
     if with_params < 2:
         return [*md, f"Only {with_params} of {len(snaps)} flights carry parameters: nothing to compare.", ""]
     diff = differences(snaps)
     if not diff:
         return [*md, f"None: the {with_params} flights with parameters were set up alike.", ""]
-    md.append("| parameter | " + " | ".join(names) + " |")
-    md.append("|---|" + "---:|" * len(names))
-    md += [f"| `{k}` | " + " | ".join(format_value(v) for v in vals) + " |" for k, vals in diff.items()]
-    return [*md, "", "– : the flight's log does not have the parameter (or no parameters at all).", ""]
-
-
-SOURCE_TABLE = {
-    "name": "source",
-    "kind": "kind",
-    "consistent": "consistent",
-    "ground_error_m": "ground error m",
-    "below_ground_m": "below ground m",
-    "max_disagreement_m": "max disagreement m",
-    "reason": "verdict",
-}
+    width = max(len(f"`{k}`") for k in diff) + 4
+    cells = [[format_value(v) for v in vals] for vals in diff.values()]
+    col = [max(len(names[j]), *(len(c[j]) for c in cells)) + 3 for j in range(len(names))]
+    start = 0
+    while start < len(names):
+        stop, used = start, width + 1
+        while stop < len(names) and (stop == start or used + col[stop] <= MAX_TABLE_WIDTH):
+            used += col[stop]
+            stop += 1
+        md.append("| parameter | " + " | ".join(names[start:stop]) + " |")
+        md.append("|---|" + "---:|" * (stop - start))
+        md += [f"| `{k}` | " + " | ".join(c[start:stop]) + " |" for k, c in zip(diff, cells)]
+        md.append("")
+        start = stop
+    return [*md, "– : the flight's log does not have the parameter (or no parameters at all).", ""]
 
 
 def source_lines(a: Analysis) -> list[str]:
@@ -435,25 +596,101 @@ def wind_lines(a: Analysis) -> list[str]:
 
 
 def heights_section(a: Analysis) -> list[str]:
-    """Markdown lines: every height source with the arbitration's verdict, then the glitch spans with
-    what each source said (referred to home) at the worst instant."""
+    """Markdown lines: every height source with the arbitration's verdict, then the glitch spans and,
+    below the table, what each source said (referred to home) at each one's worst instant."""
     md: list[str] = []
     if a.heights is not None and len(a.heights.sources) > 1:
-        table = a.heights.sources.assign(consistent=a.heights.sources["consistent"].map({True: "yes", False: "no"}))
-        md += ["### Height sources", "", markdown_table(table, SOURCE_TABLE), ""]
+        md += ["### Height sources", ""]
+        for src in a.heights.sources.itertuples():
+            why = f" ({src.reason})" if not src.consistent and isinstance(src.reason, str) and src.reason else ""
+            md.append(f"- `{src.name}` ({src.kind}): {'consistent' if src.consistent else 'not consistent'}; ground "
+                      f"error {_fmt(src.ground_error_m)} m, below ground {_fmt(src.below_ground_m)} m, max "
+                      f"disagreement {_fmt(src.max_disagreement_m)} m{why}")  # fmt: skip
+        md.append("")
     md += [f"### Estimator glitches ({len(a.glitches)})", ""]
     if not len(a.glitches):
         return [*md, "None: the height sources agree with each other and with the ground.", ""]
-    md += ["| start s | end s | duration s | max jump m | kind | source | what each source said (m above home) |",
-           "|---:|---:|---:|---:|---|---|---|"]  # fmt: skip
-    for g in a.glitches.itertuples():
+    md += ["| # | start s | end s | duration s | max jump m | kind | source |", "|---:|---:|---:|---:|---:|---|---|"]
+    said_lines = []
+    for k, g in enumerate(a.glitches.itertuples(), start=1):
+        md.append(f"| {k} | {_fmt(g.start_s)} | {_fmt(g.end_s)} | {_fmt(g.duration_s)} | {_fmt(g.max_jump_m)} | "
+                  f"{g.kind} | {f'`{g.source}`' if g.source else '–'} |")  # fmt: skip
         said = g.sources if isinstance(g.sources, dict) else {}
-        said_txt = ", ".join(f"`{k}` {_fmt(float(v))}" for k, v in said.items()) or "–"
-        md.append(
-            f"| {_fmt(g.start_s)} | {_fmt(g.end_s)} | {_fmt(g.duration_s)} | {_fmt(g.max_jump_m)} | {g.kind} | "
-            f"{f'`{g.source}`' if g.source else '–'} | {said_txt} |"
-        )
+        if said:
+            said_lines.append(f"- glitch {k}, what each source said (m above home): "
+                              + ", ".join(f"`{name}` {_fmt(float(v))}" for name, v in said.items()))  # fmt: skip
+    return [*md, "", *said_lines, *([""] if said_lines else [])]
+
+
+def _outcome_text(a: Analysis) -> str | None:
+    from flighttest.analysis.pipeline import flight_summary
+
+    s = flight_summary(a.log.meta)
+    outcome = s.get("outcome")
+    if not isinstance(outcome, str):
+        return None
+    why = s.get("abort_reason")
+    return f"{outcome}: {why}" if isinstance(why, str) and why else outcome
+
+
+def _main_row(a: Analysis) -> pd.Series | None:
+    d = a.descents
+    if "main" not in d or not d["main"].astype(bool).any():
+        return None
+    return d[d["main"].astype(bool)].iloc[0]
+
+
+OVERVIEW_HEADERS = ("#", "outcome", "descent s", "planned s", "start m", "height m", "inside s")
+
+
+def overview_section(analyses: list[Analysis], labels: list[str]) -> list[str]:
+    """Markdown lines: every flight at a glance, numbered, then one table row each."""
+    md = ["## The flights", ""]
+    for label, a in zip(labels, analyses):
+        what = a.log.mission_name or (a.descents["trajectory"].iloc[0] if len(a.descents) else None) or a.log.source
+        md.append(f"{label}. `{a.log.name}` ({what})")
+    md += ["", "| " + " | ".join(OVERVIEW_HEADERS) + " |", "|---:|---|---:|---:|---:|---:|---:|"]
+    for label, a in zip(labels, analyses):
+        m = a.main or {}
+        row = _main_row(a)
+        inside = row.get("time_inside_s") if row is not None else None
+        # flighttest's own logs: the descent time (none for a probe); other programs': the duration
+        descent = m.get("descent_time_s") if a.log.source == "flighttest-folder" else m.get("duration_s")
+        outcome = (_outcome_text(a) or "–").split(":")[0]
+        md.append(f"| {label} | {outcome} | {_fmt(descent)} | {_fmt(m.get('planned_descent_s'))} | "
+                  f"{_fmt(m.get('start_height_m'))} | {_fmt(m.get('height_m'))} | {_fmt(inside)} |")  # fmt: skip
+    md += ["", "Descent s: the main descent's time (logs of other programs: its duration); each flight's section "
+           "says why a figure is missing.", ""]  # fmt: skip
+    return md
+
+
+def legend_section() -> list[str]:
+    """What every column of the report's tables means (``flighttest.analysis.legend``)."""
+    headers = [*OVERVIEW_HEADERS, *(h for _, columns in DESCENT_TABLES for h in columns.values())]
+    md = ["## What the columns mean", ""]
+    md += [f"- **{h}**: {legend.COLUMNS[h]}" for h in dict.fromkeys(headers) if h in legend.COLUMNS]
     return [*md, ""]
+
+
+def flight_lines(a: Analysis) -> list[str]:
+    """Markdown bullets: how the flight ended, its main descent against the plan, which profile judged it."""
+    md = []
+    outcome = _outcome_text(a)
+    if outcome:
+        md.append(f"- outcome: {outcome}")
+    m = a.main or {}
+    if m.get("basis") == "planned descent":
+        flown = m.get("descent_time_s")
+        planned = f"{_fmt(m.get('planned_descent_s'))} s"
+        md.append(f"- descent time: {_fmt(flown)} s against {planned} planned" if flown is not None
+                  else f"- descent time: not reached ({planned} planned)")  # fmt: skip
+    md.append(f"- main descent: {legend.main_text(a.main, a.main_note)}")
+    t = a.tracking_summary()
+    if t:
+        md.append(f"- off the plan: at most {_fmt(t['max_m'])} m at {_fmt(t['at_max_s'])} s (rms {_fmt(t['rms_m'])} m; "
+                  f"sideways at most {_fmt(t['max_horizontal_m'])} m, vertically {_fmt(t['max_vertical_m'])} m)")
+    md.append(f"- judged with: {legend.judged_text(a.judged_with)}")
+    return md
 
 
 def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = None) -> Path:
@@ -463,40 +700,42 @@ def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = 
     except OSError as exc:
         raise FlighttestError(f"{out_dir}: cannot create report folder ({exc.strerror})") from None
     onsets = onsets or {}
-    md = ["# flighttest flight report", ""]
+    labels = [str(i) for i in range(1, len(analyses) + 1)]
+    md = ["# flighttest flight report", "", *overview_section(analyses, labels), *legend_section()]
     used: set[str] = set()
-    for a in analyses:
+    for label, a in zip(labels, analyses):
         slug = _slug(a.log.path.stem if a.log.path.is_file() else a.log.name)
         while slug in used:
             slug += "_"
         used.add(slug)
-        md += [
-            f"## {a.log.name}",
-            "",
-            f"- source: `{display_path(a.log.path)}` ({a.log.source})",
-            f"- duration: {float(a.log.state['t_s'].iloc[-1]):.1f} s, {len(a.log.state)} samples",
-        ]
+        md += [f"## {label}. {a.log.name}", "", *flight_lines(a),
+               f"- source: `{display_path(a.log.path)}` ({a.log.source})",
+               f"- duration: {float(a.log.state['t_s'].iloc[-1]):.1f} s, {len(a.log.state)} samples"]  # fmt: skip
         if a.log.mission_name:
             md.append(f"- mission: {a.log.mission_name}")
         if a.profile:
-            md.append(
-                f"- vehicle: {a.profile.name} (v_h {a.profile.v_h_mps:.2f} m/s, "
-                f"w_allow {a.profile.w_allow_mps:.2f} m/s: {a.profile.w_allow_source})"
-            )
+            md.append(f"- vehicle: {a.profile.name} (v_h {a.profile.v_h_mps:.2f} m/s, "
+                      f"w_allow {a.profile.w_allow_mps:.3f} m/s: {a.profile.w_allow_source})")  # fmt: skip
         md += source_lines(a)
         md += wind_lines(a)
         for k, v in a.log.missing.items():
             md.append(f"- missing {k}: {v}")
         md += [f"- note: {n}" for n in a.notes]
         md += ["", f"### Descents ({len(a.descents)})", ""]
-        md.append(markdown_table(a.descents, TABLE_COLUMNS) if len(a.descents) else "No descent found.")
+        if len(a.descents):
+            for k, (what, columns) in enumerate(DESCENT_TABLES):
+                md += ([""] if k else []) + [f"{what}:", "", markdown_table(a.descents, columns)]
+        else:
+            md.append("No descent found.")
         md.append("")
         md += heights_section(a)
-        md += params_section(a)
+        over = ", flown over planned" if a.plan is not None else ""
         images = [
-            ("Altitude and descent rate", plot_altitude(a, out_dir / f"{slug}_altitude.png")),
-            ("Path", plot_path(a, out_dir / f"{slug}_path.png")),
+            (f"Altitude and descent rate{over}", plot_altitude(a, out_dir / f"{slug}_altitude.png")),
+            (f"Path{over}", plot_path(a, out_dir / f"{slug}_path.png")),
         ]
+        if a.tracking is not None and len(a.tracking):
+            images.append(("Tracking error against the plan", plot_tracking(a, out_dir / f"{slug}_tracking.png")))
         if a.profile is not None and a.track is not None:
             images.append(("Velocity space", plot_velocity_space(a, out_dir / f"{slug}_velocity_space.png")))
             onset = onsets.get(str(a.log.path))
@@ -514,8 +753,7 @@ def write_report(analyses: list[Analysis], out_dir: Path, onsets: dict | None = 
             md += ["Velocity-space chart and fluctuation plot need a vehicle profile (--vehicle).", ""]
         for title, path in images:
             md += [f"### {title}", "", f"![{title}]({path.name})", ""]
-    if len(analyses) > 1:
-        md += param_differences_section(analyses, [a.log.name for a in analyses])
+    md += params_section(analyses, labels)
     out = out_dir / "report.md"
     out.write_text("\n".join(md) + "\n", encoding="utf-8")
     return out

@@ -10,7 +10,15 @@ bounce counts as part of the descent). Crossing times are interpolated between s
 rate (the central difference of the height over ``smooth_s``) and the start/end heights (medians over
 time of the interpolated height) are defined in time rather than in samples, so one flight logged at
 different rates (PX4's 125 Hz ``.ulg``, our jittery 50 Hz ``.tlog``) gives the same descents. All
-thresholds live in :class:`SegmentConfig`.
+thresholds live in :class:`SegmentConfig`. A descent's mean and max rates both come from the height
+it was timed on: the mean is its height over its duration, the max the fastest fall of the same
+height over ``smooth_s``, never below the mean (an estimator's velocity can read 0.4 m/s while its
+height falls at 0.16, and a max below the mean says nothing true).
+
+A window known to hold one descent (a flighttest flight's main descent, timed from its events by
+:mod:`flighttest.analysis.descent_time`) is passed as ``exclude``: no descent found here starts, ends or
+merges across it, so the one descent there is not cut into pieces at its slow spots, nor joined to the
+landing that follows it.
 
 An **estimator glitch** is a sample whose altitude jumps away from its neighbours (more than
 ``glitch_jump_m`` off the running median over ``glitch_window_s``, or moving faster than
@@ -28,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from flighttest.analysis.descent_time import RATE_WINDOW_S
 from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M, MAX_HORIZONTAL_M, MAX_SPEED_MPS, Range
 
 
@@ -36,7 +45,7 @@ class SegmentConfig:
     rate_threshold_mps: float = 0.15  # a descent falls at least this fast (smoothed)
     min_height_m: float = 0.5  # smaller drops are station-keeping, not descents
     merge_gap_s: float = 1.0  # pauses shorter than this do not split a descent
-    smooth_s: float = 0.2  # centred moving average on rates, against sensor noise
+    smooth_s: float = RATE_WINDOW_S  # centred moving average on rates, against sensor noise
     settle_window_s: float = 1.0  # start/end heights: medians over this long outside the descent
     start_tol_m: float = 0.05  # the descent starts once this far below the start height
     end_tol_m: float = 0.10  # ... and ends once within this of the end height
@@ -155,10 +164,12 @@ def find_descents(
     cfg: SegmentConfig | None = None,
     bridged: np.ndarray | None = None,
     source: str | None = None,
+    exclude: tuple[float, float] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(descents, jump glitches). Sets ``state['glitch']`` (jumps and ``bridged`` samples). Descent
     columns: see module docstring and ``DESCENT_COLUMNS``; times on the state clock ``t_s``.
-    ``source`` names the height ``d_m`` holds, for the glitch table."""
+    ``source`` names the height ``d_m`` holds, for the glitch table; ``exclude`` (start, end) is a
+    window no descent found here may touch (module docstring)."""
     cfg = cfg or SegmentConfig()
     t = state["t_s"].to_numpy(float)
     d_raw = state["d_m"].to_numpy(float)
@@ -169,24 +180,27 @@ def find_descents(
     if jump.any() and (~jump).sum() >= 2:
         d[jump] = np.interp(t[jump], t[~jump], d_raw[~jump])
     h = -d
-    n_s = samples_in(t, cfg.smooth_s)
     rate = _rate(t, h, cfg.smooth_s)
-    vd = state["vd_mps"].to_numpy(float)
-    vd_s = pd.Series(vd).rolling(n_s, center=True, min_periods=1).mean().to_numpy()
-
-    runs = true_runs(rate > cfg.rate_threshold_mps)
+    falling = rate > cfg.rate_threshold_mps
+    if exclude is not None:
+        falling &= ~((t >= exclude[0]) & (t <= exclude[1]))
+    runs = true_runs(falling)
     merged: list[list[int]] = []
     for a, b in runs:
-        if merged and t[a] - t[merged[-1][1]] < cfg.merge_gap_s:
+        across = bool(merged) and exclude is not None and t[merged[-1][1]] < exclude[0] <= t[a]
+        if merged and t[a] - t[merged[-1][1]] < cfg.merge_gap_s and not across:
             merged[-1][1] = b
         else:
             merged.append([a, b])
+    i_excl = int(np.searchsorted(t, exclude[0])) if exclude is not None else len(t)
 
     n_e, e = state["n_m"].to_numpy(float), state["e_m"].to_numpy(float)
     rows = []
     for k, (a, b) in enumerate(merged):
         # a descent ends before the next one starts (an oscillating probe revisits old heights later)
         limit = merged[k + 1][0] if k + 1 < len(merged) else len(t)
+        if a < i_excl:  # ... nor into the excluded window after it
+            limit = min(limit, i_excl)
         before = (t >= t[a] - cfg.settle_window_s) & (t <= t[a])
         # the stretch from where the rate crosses the threshold (between samples), so the windows
         # below sit at the same instants however the log was sampled
@@ -225,6 +239,9 @@ def find_descents(
         t1 = _crossing(t, h, i1, level) if len(cand) or len(reached) else float(t[i1])
         span = slice(max(i0 - 1, 0), i1 + 1)
         horiz = np.hypot(n_e[span] - n_e[i0], e[span] - e[i0])
+        mean = (h0 - h1) / max(t1 - t0, 1e-9)
+        during = (t >= t0) & (t <= t1)
+        fastest = float(np.nanmax(rate[during])) if np.isfinite(rate[during]).any() else mean
         rows.append(
             {
                 "start_s": t0,
@@ -233,10 +250,9 @@ def find_descents(
                 "height_m": h0 - h1,
                 "start_alt_m": h0,
                 "end_alt_m": h1,
-                "mean_rate_mps": (h0 - h1) / max(t1 - t0, 1e-9),
-                "max_rate_mps": float(np.nanmax(vd_s[span]))
-                if np.isfinite(vd_s[span]).any()
-                else float(np.max(rate[span])),
+                "mean_rate_mps": mean,
+                # the height's own rate, as the mean; at least the mean (module docstring)
+                "max_rate_mps": max(fastest, mean),
                 "horizontal_excursion_m": float(np.nanmax(horiz)),
                 "glitch": bool(glitch[span].any()),
                 "settled": bool(len(cand)),

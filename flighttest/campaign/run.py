@@ -24,15 +24,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from flighttest.campaign.rehearsal import SIM_DEFAULT_PARAMS, SIM_DEFAULT_PARAMS_ARDUPILOT  # noqa: F401 (re-export)
 from flighttest.campaign.state import FLIGHT_STEPS, STEPS, TITLES, CampaignState, StepStatus
 from flighttest.campaign.steps import RUNNERS, StepContext, StepFailed, write_configs
 from flighttest.campaign.summary import known_summary, read_summary
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile, load_profile
-
-SIM_DEFAULT_PARAMS: Mapping[str, float] = {"MPC_Z_VEL_MAX_DN": 3.0}  # rehearsal: offboard descents unclipped
-# ArduCopter's defaults as they are: its plans fit them (the profile's [autopilot] limits) or the preflight says
-SIM_DEFAULT_PARAMS_ARDUPILOT: Mapping[str, float] = {}
 
 
 def _default_sim_params() -> dict[str, float]:
@@ -120,8 +117,9 @@ def step_brief(step: str, outputs: dict[str, Any]) -> str:
     """The one line after a step's tick: what it found or flew and where it wrote it."""
     o = outputs
     if step in FLIGHT_STEPS:
-        d = o.get("descent_time_s")
-        return f"{o['outcome']}" + (f", descent {d:.2f} s" if d else "") + f"; log {o['log_dir']}"
+        d, plan = o.get("descent_time_s"), o.get("planned_descent_s")
+        planned = f" (planned {plan:.2f} s)" if isinstance(plan, int | float) else ""
+        return f"{o['outcome']}" + (f", descent {d:.2f} s{planned}" if d else "") + f"; log {o['log_dir']}"
     if step == "identify":
         if o.get("onset_found") is False:
             return f"{o['message']} → {o['profile']}"

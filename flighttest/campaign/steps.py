@@ -105,8 +105,8 @@ def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfi
     # log_dir is None when nothing answered (the flight left no folder)
     aborts = guard_aborts(Path(out.log_dir)) if out.log_dir else 0
     rec = {"log_dir": out.log_dir, "outcome": out.outcome, "abort_reason": out.abort_reason,
-           "descent_time_s": out.descent_time_s, "horizontal_error_m": out.extra.get("horizontal_error_m"),
-           "guard_aborts": aborts}  # fmt: skip
+           "descent_time_s": out.descent_time_s, "planned_descent_s": out.extra.get("planned_descent_s"),
+           "horizontal_error_m": out.extra.get("horizontal_error_m"), "guard_aborts": aborts}  # fmt: skip
     if out.outcome not in FLIGHT_OK[step]:
         why = out.abort_reason or "no reason given"
         raise StepFailed(f"{step} flight {out.outcome}: {why}" + (f" (log {out.log_dir})" if out.log_dir else ""), rec)

@@ -16,6 +16,7 @@ from typing import Any
 import pandas as pd
 
 from flighttest import __version__
+from flighttest.analysis import legend
 from flighttest.analysis.compare import add_speedup, compare_row
 from flighttest.analysis.descent_time import DescentRule
 from flighttest.campaign.state import STEPS, CampaignState
@@ -26,13 +27,14 @@ from flighttest.model.profiles import VehicleProfile
 REPORT_FILES = ("summary.md", "summary.json", "compare.csv", "report.md", "velocity_space.png", "descent_times.png")
 FLIGHTS = ("probe", "vertical", "helix")
 DESCENTS = ("vertical", "helix")
-ROWS = (  # the summary table, one column per descent: label, key, format
+ROWS = (  # the summary table, one column per descent: label, key, format (labels fit an 80-column line)
     ("outcome", "outcome", "{}"),
-    ("descent time s (stream start → end height, settled)", "descent_time_s", "{:.2f}"),
+    ("descent time s (first setpoint → settled at the end)", "descent_time_s", "{:.2f}"),
+    ("planned descent time s (the plan, same rule)", "planned_descent_s", "{:.2f}"),
     ("speed-up × (vertical / this)", "speedup_vs_vertical", "{:.2f}"),
     ("horizontal error at that instant m", "horizontal_error_m", "{:.2f}"),
+    ("start height m (above the ground)", "start_height_m", "{:.2f}"),
     ("height m", "height_m", "{:.2f}"),
-    ("descending s (log segment)", "duration_s", "{:.2f}"),
     ("mean descent rate m/s", "mean_rate_mps", "{:.2f}"),
     ("max descent rate m/s", "max_rate_mps", "{:.2f}"),
     ("horizontal excursion m", "horizontal_excursion_m", "{:.2f}"),
@@ -94,6 +96,7 @@ def known_summary(state: CampaignState, profile: VehicleProfile) -> dict[str, An
         if o:
             rows[step] = {"step": step, "status": state.steps[step].status, "outcome": o.get("outcome"),
                           "guard_aborts": o.get("guard_aborts"), "descent_time_s": o.get("descent_time_s"),
+                          "planned_descent_s": o.get("planned_descent_s"),
                           "horizontal_error_m": o.get("horizontal_error_m"), "log_dir": o.get("log_dir")}  # fmt: skip
     t_v, t_h = (rows.get(d, {}).get("descent_time_s") for d in DESCENTS)
     if isinstance(t_v, int | float) and isinstance(t_h, int | float) and t_h > 0:
@@ -120,18 +123,38 @@ def headlines(s: dict) -> list[str]:
                  f"{cell(s, 'identified_uncertainty_mps', '{:.3f}')} m/s "
                  f"({cell({'n': onset_n}, 'n', '{:.3f}')} v_h; v_h {s['v_h_mps']:.2f} m/s; "
                  f"the profile said {cell(s, 'prior_w_allow_mps', '{:.3f}')} m/s)")  # fmt: skip
-    return [
-        first,
-        f"over the same height the helix took {cell(s, 'helix_descent_s', '{:.2f}')} s against the vertical "
-        f"baseline's {cell(s, 'vertical_descent_s', '{:.2f}')} s: "
-        f"{cell(s, 'speedup_helix_vs_vertical', '{:.2f}')}× as fast",
-    ]
+    helix = next((f for f in s.get("flights", []) if f.get("step") == "helix"), {})
+    times = (f"the helix took {cell(s, 'helix_descent_s', '{:.2f}')} s against the vertical baseline's "
+             f"{cell(s, 'vertical_descent_s', '{:.2f}')} s")  # fmt: skip
+    if helix.get("descent_differs"):
+        second = f"{times}, but no speed-up: the helix {helix['descent_differs']} (the vertical baseline's)"
+    else:
+        second = f"over the same height {times}: {cell(s, 'speedup_helix_vs_vertical', '{:.2f}')}× as fast"
+    return [first, second]
 
 
 def table_rows(s: dict) -> list[tuple[str, str, str]]:
     """(quantity, vertical, helix) rows of the summary table."""
     flights = {f["step"]: f for f in s["flights"]}
     return [(label, *(cell(flights.get(d, {}), key, fmt) for d in DESCENTS)) for label, key, fmt in ROWS]
+
+
+ROW_LEGEND = {  # summary-table key: the legend's header for it (flighttest.analysis.legend.COLUMNS)
+    "descent_time_s": "descent s", "planned_descent_s": "planned s", "speedup_vs_vertical": "speed-up ×",
+    "horizontal_error_m": "horiz. err m", "start_height_m": "start m", "max_rate_mps": "max m/s",
+    "horizontal_excursion_m": "horiz. m", "time_inside_s": "inside s", "time_near_s": "near s",
+    "min_margin_mps": "min margin m/s", "time_inside_worst_s": "inside, worst air s", "wind_speed_mps": "wind m/s",
+}  # fmt: skip
+
+
+def row_legend() -> list[tuple[str, str]]:
+    """(row label, what it means) for the summary table's rows that need more than their label."""
+    out = [(label, legend.COLUMNS[ROW_LEGEND[key]]) for label, key, _ in ROWS if key in ROW_LEGEND]
+    out += [("wind 1 σ m/s", "the uncertainty of that wind"),
+            ("wind from", "what flighttest flew with, else the autopilot's estimate, else flighttest's estimate "
+             "from the IMU and the drag model (`flighttest.analysis.wind`)"),
+            ("guard aborts", "the live guard's abort orders in the flight (`guard.csv`)")]  # fmt: skip
+    return out
 
 
 def summary_markdown(summary: dict) -> str:
@@ -144,20 +167,28 @@ def summary_markdown(summary: dict) -> str:
         "|---|---:|---:|",
     ]
     lines += [f"| {q} | {v} | {h} |" for q, v, h in table_rows(summary)]
-    notes = [f"- {f['step']}: {f['main_descent_note']}" for f in summary["flights"] if f.get("main_descent_note")]
+    notes = []
+    for f in summary["flights"]:
+        if f.get("abort_reason"):
+            notes.append(f"- {f['step']}: {f.get('outcome')}: {f['abort_reason']}")
+        if f.get("main_descent_note"):
+            notes.append(f"- {f['step']}: {f['main_descent_note']}")
+        if f.get("descent_differs"):
+            notes.append(f"- {f['step']}: {f['descent_differs']} (the vertical baseline's)")
+        if f.get("judged_with"):
+            notes.append(f"- {f['step']} judged with {legend.judged_text(f['judged_with'])}")
     lines += ["", *notes] if notes else []
     lines += [
         "",
-        "Descent time: from the first setpoint of the planned descent until the vehicle is at its end point's",
-        f"height with its vertical speed settled ({DescentRule().describe()}; the vertical axis only: the",
-        "horizontal error at that instant is in the table). The figures show that span. Log segment: the main",
-        "descent found in each flight's log (`flighttest compare`), never one the abort ladder flew (PX4's Land",
-        "after an abort). Inside/near: time with the blade-frame velocity inside /",
-        "within the margin of the guard region, air-relative with the wind in the table (what flighttest flew",
-        "with, else the autopilot's estimate, else flighttest's estimate from the IMU's drag:",
-        "`flighttest.analysis.wind`), and at the worst air within 2.45 σ of it as the live guard judges; guard",
-        "aborts: the live guard's abort orders (`guard.csv`).",
-        "Every flight in detail, the probe's fluctuation plot with the onset: [report.md](report.md).",
+        "The main descent of each flight is one descent, whatever phases it crossed: from the first setpoint of the",
+        "planned descent until the vehicle is at its end point's height with its vertical speed settled",
+        f"({DescentRule().describe()}; the vertical axis only: the horizontal",
+        "error at that instant is in the table). `flighttest fly`, `analyse`, `compare` and `report` give the same.",
+        "",
+        *(f"- {label}: {text}" for label, text in row_legend()),
+        "",
+        "Every flight in detail, its plan under its flown path, the probe's fluctuation plot with the onset:",
+        "[report.md](report.md).",
         "",
         "![velocity space](velocity_space.png)",
         "",
@@ -189,15 +220,23 @@ def _write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dic
         log_dir = state.maybe_path(step, "log_dir")
         if log_dir is None:
             continue
-        analyses[step] = a = analyse(load_log(log_dir), profile.path)
+        # each flight judged with the profile it flew with (the probe with the prior, the descents with
+        # the identified w_allow), the campaign's profile only for a flight whose log does not say
+        a = analyse(load_log(log_dir))
+        if a.profile is None:
+            a = analyse(load_log(log_dir), profile.path)
+        analyses[step] = a
         o = state.steps[step].outputs
-        rows[step] = {"step": step, "outcome": o.get("outcome"), "guard_aborts": o.get("guard_aborts"),
-                      **compare_row(str(log_dir), a.descents, a.log.events)}  # fmt: skip
+        row = compare_row(str(log_dir), a.descents, a.log.events, a.log.meta, main=a.main)
+        rows[step] = {"step": step, **row, "outcome": o.get("outcome", row.get("outcome")),
+                      "guard_aborts": o.get("guard_aborts"), "judged_with": a.judged_with}  # fmt: skip
     if "vertical" not in analyses or "helix" not in analyses:
         raise FlighttestError("the report needs both the vertical and the helix flight")
     for row in add_speedup([rows["vertical"], rows["helix"]], key="descent_time_s"):
         row["speedup_vs_vertical"] = row.pop("speedup_vs_first")
-    pd.DataFrame([rows[s] for s in DESCENTS]).to_csv(out_dir / "compare.csv", index=False)
+    pd.DataFrame([{k: v for k, v in rows[s].items() if k != "judged_with"} for s in DESCENTS]).to_csv(
+        out_dir / "compare.csv", index=False
+    )
     onsets = {}
     if "probe" in analyses:
         # no onset, or one not trusted: the probe's plot says "no onset identified", the summary that the

@@ -10,8 +10,9 @@ from flighttest.errors import FlighttestError
 
 DESCRIPTION = """\
 flighttest: fast-descent flight tests that avoid the vortex ring state (VRS) and the windmill-brake
-state (WBS) on quadcopters (Talaeizadeh et al.). Plan minimum-time descents, fly them in PX4 offboard
-with a live blade-frame VRS guard, probe the VRS onset with a sine sweep, and analyse the logs.
+state (WBS) on quadcopters (Talaeizadeh et al., arXiv:1909.09069; docs/PAPER.md). Plan minimum-time
+descents, fly them in PX4 offboard (or ArduCopter GUIDED) with a live blade-frame VRS guard, probe the
+VRS onset with a sine sweep, and analyse the logs.
 """
 
 EPILOG = """\

@@ -15,7 +15,8 @@ from rich.measure import Measurement
 from rich.table import Table
 from rich.text import Text
 
-from flighttest.analysis.compare import add_param_differences, add_speedup, compare_row
+from flighttest.analysis import legend
+from flighttest.analysis.compare import add_param_differences, add_speedup, compare_row, refused_speedups
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
 from flighttest.flying.wind import WIND_COVERAGE_SIGMAS
@@ -43,6 +44,17 @@ def _add_segment_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--settle-hold", type=FINITE, metavar="S", help="... for at least this long (0.5)")
 
 
+VEHICLE_HELP = ("judge every log with this profile as it is today (default: each flighttest flight with the "
+                "vehicle it flew with, from its meta.json)")  # fmt: skip
+
+
+def _add_profile_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--vehicle", metavar="NAME", help=VEHICLE_HELP)
+    p.add_argument("--profile-now", action="store_true",
+                   help="judge each flight with its vehicle's profile as it is today (after identify "
+                        "--write-profile, say), not with the w_allow it flew with")  # fmt: skip
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     pa = sub.add_parser(
         "analyse",
@@ -56,7 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "core, and its per-descent table written as Parquet.",
     )
     pa.add_argument("logs", nargs="+", metavar="LOG|DIR")  # text: Path("") would be the current folder
-    pa.add_argument("--vehicle", metavar="NAME", help="vehicle profile (default: the one in the log's meta.json)")
+    _add_profile_options(pa)
     pa.add_argument(
         "--json",
         action="store_true",
@@ -76,8 +88,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     pc = sub.add_parser("compare", help="descent times side by side, speed-up ratio and VRS exposure")
     pc.add_argument("logs", nargs="+", metavar="LOG")
-    pc.add_argument("--vehicle", metavar="NAME", help="vehicle profile (default: from each log)")
+    _add_profile_options(pc)
     pc.add_argument("--json", action="store_true", help='machine-readable output (a log that failed: {"log", "error"})')
+    pc.add_argument("--allow-unequal", action="store_true",
+                    help="give the speed-up even where the main descents start at different heights or "
+                         "descend different heights (without it: refused, exit code 2)")  # fmt: skip
     pc.add_argument("--wide", action="store_true", help="one row per flight, however narrow the terminal")
     _add_segment_options(pc)
     pc.set_defaults(func=cmd_compare)
@@ -85,7 +100,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     pr = sub.add_parser("report", help="PNG plots and a Markdown summary of flight logs")
     pr.add_argument("logs", nargs="+", metavar="LOG")
     pr.add_argument("-o", "--output", required=True, metavar="DIR", help="folder for report.md and PNGs")
-    pr.add_argument("--vehicle", metavar="NAME", help="vehicle profile (default: from each log)")
+    _add_profile_options(pr)
     _add_segment_options(pr)
     pr.set_defaults(func=cmd_report)
 
@@ -109,7 +124,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     pi.add_argument(
         "--write-profile",
         action="store_true",
-        help="store the onset as w_allow (with --drag: the drag model) in the user's copy of the profile",
+        help="store the onset as w_allow (with --drag: the drag model) in your copy of the profile: the first "
+        "folder of $FLIGHTTEST_VEHICLES, else ~/.config/flighttest/vehicles/ (a shipped profile stays as shipped)",
     )
     pi.add_argument("--drag", action="store_true",
                     help="identify the airframe's drag from a calibration flight (`flighttest fly drag`) instead: "
@@ -188,14 +204,14 @@ def _expand(paths: list[Path]) -> tuple[list[Path], list[Path]]:
     return logs, walked
 
 
-def _run(paths: list[Path], vehicle: str | None, seg, jobs: int | None = None):
+def _run(paths: list[Path], vehicle: str | None, seg, jobs: int | None = None, profile_now: bool = False):
     from flighttest.analysis.batch import analyse_many
 
     if vehicle:
         from flighttest.model.profiles import load_profile
 
         load_profile(vehicle)  # a bad profile is one error, not one per log
-    results = analyse_many(paths, vehicle, seg, jobs)
+    results = analyse_many(paths, vehicle, seg, jobs, profile_now)
     errors = [err for _, _, err in results if err]
     for err in errors:
         print(f"flighttest: error: {err}", file=sys.stderr)
@@ -309,7 +325,7 @@ def _descent_cells(d: pd.DataFrame) -> list[list[str]]:
             if header == "phase":
                 cells.append(v if isinstance(v, str) and v else "–")
             elif header == "#":
-                cells.append(str(v))
+                cells.append(f"{v}{legend.MAIN_MARK}" if r.get("main") is True else str(v))
             else:
                 cells.append(_num(v, fmt))
         rows.append(cells)
@@ -354,15 +370,19 @@ def cmd_analyse(args: argparse.Namespace) -> int:
             parquet = check_output_path(walked[0] / PARQUET_NAME, "the Parquet table", (".parquet",))
         except FlighttestError as exc:
             print(f"flighttest: warning: not writing {exc}", file=sys.stderr)
-    results, errors, outcome = _run(logs, args.vehicle, seg, args.jobs)
+    results, errors, outcome = _run(logs, args.vehicle, seg, args.jobs, args.profile_now)
     tables = [r["descents"] for r in results]
     if args.json:
         print_json(_in_input_order(outcome, [r["summary"] for r in results]))
     else:
+        shown: list[str] = []
         for r in results:
             s = r["summary"]
             title = f"{s['log']} ({s['source']}, {s['duration_s']:.1f} s, vehicle {s['vehicle'] or '–'})"
-            _print_all(descent_tables(title, r["descents"], wide=args.wide))
+            renderables = descent_tables(title, r["descents"], wide=args.wide)
+            _print_all(renderables)
+            shown += [h for h in _headers_of(renderables) if h not in shown]
+            _print_flight(s)
             _print_sources(s)
             for g in s["glitches"]:
                 console.print(Text(_glitch_line(g)))
@@ -371,6 +391,8 @@ def cmd_analyse(args: argparse.Namespace) -> int:
                 console.print(f"  missing {k}: {v}", markup=False)
             for n in s["notes"]:
                 console.print(f"  note: {n}", markup=False)
+    if not args.json and results:
+        console.print(_legend_table(shown))
     if csv is not None:
         df = descent_table(tables) if any(len(t) for t in tables) else pd.DataFrame()
         try:
@@ -424,6 +446,41 @@ def airborne_line(s: dict) -> str | None:
             f"{at_worst}, min margin {_num(e.get('min_margin_mps'))} m/s")  # fmt: skip
 
 
+def _legend_table(headers: list[str]) -> Table:
+    """What each of ``headers`` means (``flighttest.analysis.legend``), the meanings wrapped beside them."""
+    t = Table.grid(padding=(0, 1))
+    t.add_column(no_wrap=True, justify="right")
+    t.add_column(ratio=1)
+    for h in headers:
+        if h in legend.COLUMNS:
+            t.add_row(Text(h), Text(legend.COLUMNS[h]))
+    return t
+
+
+def _headers_of(renderables: list) -> list[str]:
+    """The column headers (and, stacked, the row labels) of the tables among ``renderables``."""
+    out: list[str] = []
+    for item in renderables:
+        if isinstance(item, Table):
+            out += [str(c.header) for c in item.columns if str(c.header)]
+            if item.columns and not str(item.columns[0].header):  # stacked: the labels are the first column
+                out += [str(cell) for cell in item.columns[0].cells]
+    return out
+
+
+def _print_flight(s: dict) -> None:
+    """How the flight ended, its main descent and which profile judged it (``analyse`` summary keys)."""
+    if s.get("outcome"):
+        why = f" ({s['abort_reason']})" if s.get("abort_reason") else ""
+        console.print(Text(f"  outcome: {s['outcome']}{why}"))
+    console.print(Text(f"  main descent: {legend.main_text(s.get('main_descent'), s.get('main_descent_note'))}"))
+    t = s.get("tracking_error")
+    if t:
+        console.print(Text(f"  off the plan: at most {_num(t.get('max_m'))} m (rms {_num(t.get('rms_m'))} m; "
+                           f"sideways {_num(t.get('max_horizontal_m'))}, vertically {_num(t.get('max_vertical_m'))})"))
+    console.print(Text(f"  judged with: {legend.judged_text(s.get('judged_with'))}"))
+
+
 def _print_sources(s: dict) -> None:
     """Where the log's height, attitude, wind and parameters came from (keys the summary may carry)."""
     if s.get("height_source"):
@@ -445,9 +502,10 @@ def _print_sources(s: dict) -> None:
 
 COMPARE_COLUMNS = {  # header: (key, format)
     "outcome": ("outcome", "{}"),
+    "start m": ("start_height_m", "{:.2f}"),
     "height m": ("height_m", "{:.2f}"),
-    "duration s": ("duration_s", "{:.2f}"),
-    "descent s": ("descent_time_s", "{:.2f}"),
+    "descent s": ("descent_time_s", "{:.2f}"),  # logs of other programs: duration_s (_compare_cell)
+    "planned s": ("planned_descent_s", "{:.2f}"),
     "horiz. err m": ("horizontal_error_m", "{:.2f}"),
     "speed-up ×": ("speedup_vs_first", "{:.2f}"),
     "mean m/s": ("mean_rate_mps", "{:.2f}"),
@@ -471,6 +529,12 @@ def _flight_headers(names: list[str], kinds: list[str], labels: list[str], cells
     return [str(i) for i in range(1, len(names) + 1)], legend
 
 
+def _compare_cell(row: dict, key: str, fmt: str) -> str:
+    if key == "descent_time_s" and key not in row:  # a log of another program: its main descent's duration
+        key = "duration_s"
+    return _num(row.get(key), fmt)
+
+
 def compare_tables(rows: list[dict], wide: bool = False, width: int | None = None) -> list:
     """``flighttest compare`` as renderables that fit ``width``: one row per flight when that fits
     (or ``wide``), else one column per flight (numbered, with a legend, when the names are long),
@@ -479,7 +543,7 @@ def compare_tables(rows: list[dict], wide: bool = False, width: int | None = Non
     names = [Path(row["log"]).name for row in rows]
     kinds = [str(row.get("trajectory") or row.get("mission") or "–") for row in rows]
     title = "descent times side by side (the main descent of each flight)"
-    values = [[_num(row.get(key), fmt) for key, fmt in COMPARE_COLUMNS.values()] for row in rows]
+    values = [[_compare_cell(row, key, fmt) for key, fmt in COMPARE_COLUMNS.values()] for row in rows]
     flat = _row_table(
         title, ["log", "mission", *COMPARE_COLUMNS], [[n, k, *v] for n, k, v in zip(names, kinds, values)],
         left=("log", "mission", "outcome"),
@@ -521,34 +585,43 @@ def param_difference_tables(rows: list[dict], headers: list[str], wide: bool = F
 
 def cmd_compare(args: argparse.Namespace) -> int:
     seg = _seg_config(args)
-    results, errors, outcome = _run(_log_paths(args.logs), args.vehicle, seg)
-    rows = [
-        compare_row(
-            r["summary"]["log"], r["descents"], r["events"], r.get("meta") or {}, r["summary"].get("params") or {}
-        )
-        for r in results
-    ]
+    results, errors, outcome = _run(_log_paths(args.logs), args.vehicle, seg, profile_now=args.profile_now)
+    rows = []
+    for r in results:
+        s = r["summary"]
+        rows.append(compare_row(s["log"], r["descents"], r["events"], r.get("meta") or {}, s.get("params") or {},
+                                s.get("main_descent")))  # fmt: skip
     # flighttest's own logs know when each descent started and came to rest: compare those; others by segment
     basis = "descent_time_s" if rows and all(row.get("descent_time_s") for row in rows) else "duration_s"
-    for row in add_speedup(rows, key=basis):
+    for row, r in zip(rows, results):
+        row["judged_with"] = r["summary"].get("judged_with")
+    for row in add_speedup(rows, key=basis, allow_unequal=args.allow_unequal):
         row["speedup_basis"] = basis
     add_param_differences(rows)
+    refused = refused_speedups(rows, [Path(row["log"]).name for row in rows], basis)
     if args.json:
         print_json(_in_input_order(outcome, rows))  # speed-ups are against the first log analysed
     else:
         _print_all(compare_tables(rows, wide=args.wide))
         for row in rows:
+            name = Path(row["log"]).name
             if row.get("main_descent_note"):
-                console.print(f"{Path(row['log']).name}: {row['main_descent_note']}", markup=False)
-        console.print(
-            "duration: the main descent found in the log (never one the abort ladder flew); descent: flighttest's "
-            "own logs, from the first setpoint of the descent until at its end height with the vertical speed "
-            "settled, horiz. err: off the end point sideways then; speed-up × = the first log's "
-            f"{'descent time' if basis == 'descent_time_s' else 'duration'} / this one's; inside: at the wind's "
-            f"estimate, inside worst: at the worst air within {WIND_COVERAGE_SIGMAS:g} σ of it (wind: its speed "
-            "over the descent; --json: its vector, 1 σ and source)"
-        )
-    return 2 if errors else 0
+                console.print(f"{name}: {row['main_descent_note']}", markup=False)
+            elif row.get("descent_differs") and not refused:
+                console.print(f"{name}: {row['descent_differs']} (the first log's main descent)", markup=False)
+        judged = {legend.judged_text(row.get("judged_with")) for row in rows}
+        if len(judged) == 1:
+            console.print(Text(f"judged with: {judged.pop()}"))
+        else:
+            for row in rows:
+                judged_text = legend.judged_text(row.get("judged_with"))
+                console.print(Text(f"{Path(row['log']).name}: judged with {judged_text}"))
+        console.print(_legend_table(list(COMPARE_COLUMNS)))
+        if basis != "descent_time_s":
+            console.print("speed-up: of the main descents' durations (not every log has a descent time)")
+    if refused:
+        print(f"flighttest: error: {refused}", file=sys.stderr)
+    return 2 if errors or refused else 0
 
 
 def _is_probe(a) -> bool:
@@ -574,7 +647,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     for path in paths:
         try:
             with quiet_numerics():
-                a = analyse(load_log(path), args.vehicle, seg)
+                a = analyse(load_log(path), args.vehicle, seg, profile_now=args.profile_now)
         except FlighttestError as exc:
             print(f"flighttest: error: {exc}", file=sys.stderr)
             failed += 1

@@ -44,9 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("campaign", help="the whole field day: probe, identify, plan, fly vertical and helix, report",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     link = p.add_mutually_exclusive_group(required=True)
-    link.add_argument(
-        "--connect", metavar="URL", help="the vehicle: udpin://0.0.0.0:14540, serial:///dev/ttyUSB0:57600, …"
-    )
+    link.add_argument("--connect", metavar="URL",
+                      help="the vehicle: serial:///dev/ttyAMA0:921600 (a companion on TELEM2), udpin://0.0.0.0:14540 "
+                      "(PX4 SITL), udpout://127.0.0.1:14580 (flighttest sim), …")  # fmt: skip
     link.add_argument("--sim", action="store_true", help="fly the built-in fake vehicle (started and stopped here)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="the campaign's folder")
     p.add_argument("--vehicle", metavar="NAME", help="vehicle profile name or .toml path (with --sim default x500)")
@@ -66,6 +66,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
+    from flighttest.campaign.rehearsal import sim_param_help
+
     p.add_argument("--yes", action="store_true", help="do not ask before each step and each flight")
     p.add_argument("--stale-periods", type=float, metavar="N",
                    help="stale-telemetry allowance in telemetry periods (default: the mission configs' "
@@ -77,9 +79,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help="the fake's true VRS onset descent rate (default: Onera's for its profile)")  # fmt: skip
     g.add_argument("--sim-wind", type=float, nargs=3, metavar=("N", "E", "D"), help="the fake's wind, m/s NED")
     g.add_argument("--sim-seed", type=int, metavar="N", help="seed of the fake's fluctuations and gusts")
-    g.add_argument("--sim-param", action="append", default=[], metavar="NAME=VALUE",
-                   help="a parameter of the fake's autopilot (PX4 default MPC_Z_VEL_MAX_DN=3; ArduPilot: "
-                   "its defaults)")  # fmt: skip
+    g.add_argument("--sim-param", action="append", default=[], metavar="NAME=VALUE", help=sim_param_help())
     g.add_argument("--sim-autopilot", choices=("px4", "ardupilot"), default="px4",
                    help="the fake's personality: PX4 (default) or ArduCopter (GUIDED, BRAKE, its parameters, "
                    "its EKF's 42 s start-up; fly it with --vehicle arducopter_sitl)")  # fmt: skip
@@ -103,7 +103,8 @@ def _validate(args: argparse.Namespace) -> SimOptions | None:
     """Every input checked before the fake starts or anything connects; returns the fake's options
     (None with --connect)."""
     from flighttest import inputs as ip
-    from flighttest.campaign.run import SIM_DEFAULT_PARAMS, SIM_DEFAULT_PARAMS_ARDUPILOT, SimOptions
+    from flighttest.campaign.rehearsal import SIM_DEFAULT_PARAMS, SIM_DEFAULT_PARAMS_ARDUPILOT
+    from flighttest.campaign.run import SimOptions
     from flighttest.flying.link import check_connection, check_url
 
     if args.connect is not None:  # an empty URL is a link asked for, and refused by check_url

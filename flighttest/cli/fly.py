@@ -1,10 +1,11 @@
-"""``flighttest fly probe|helix|vertical|TRAJECTORY_FILE --connect URL --vehicle NAME``.
+"""flighttest fly probe|helix|vertical|drag|TRAJECTORY_FILE --connect URL --vehicle NAME
 
-The three named missions are mission scripts, each with its TOML config beside it (the user's
-copies first, else the shipped ones: see the end of ``--help``); a trajectory file is flown as
-planned. Prints the preflight table, asks go/no-go (``--yes`` skips it; without a terminal and
-without ``--yes`` it refuses to arm), flies with the live guard, and prints the flight's log folder
-at the end (``--json``: the summary).
+The named missions are mission scripts, each with its TOML config beside it (the user's copies
+first, else the shipped ones: see the end of --help); probe, helix and vertical plan as
+`flighttest plan` does by default. A trajectory file (`flighttest plan ... -o NAME`) is flown as planned, from --height.
+Prints the preflight table, asks go/no-go (--yes skips it; without a terminal and without --yes it
+refuses to arm), flies with the live guard, and prints the flight's log folder at the end (--json:
+the summary).
 """
 
 from __future__ import annotations
@@ -43,7 +44,9 @@ def add_fly_arguments(p: argparse.ArgumentParser, target: bool = True) -> None:
     p.add_argument("--connect", required=True, metavar="URL",
                    help="vehicle link: udpin://0.0.0.0:14540, udpout://HOST:PORT, tcpout://HOST:PORT, serial://DEV:BAUD")
     p.add_argument("--vehicle", required=True, metavar="NAME", help="vehicle profile name or .toml path")
-    p.add_argument("--config", type=Path, metavar="TOML", help="mission config (default: the mission's own TOML)")
+    p.add_argument("--config", type=Path, metavar="TOML",
+                   help="mission config (default: a named mission's own TOML; a trajectory file: the defaults "
+                        "of flighttest.flying.missions_config)")  # fmt: skip
     defaults = mission_defaults()
     p.add_argument("--height", type=float, metavar="H",
                    help=f"start height above home in m (overrides the config; {defaults['height']})")
@@ -75,7 +78,7 @@ def mission_defaults() -> dict[str, str]:
     """The named missions' start heights and descents as their TOMLs set them, for ``--help``
     (``height``: "probe 8 m, helix 7 m, vertical 5 m"; a config that does not load says so)."""
     from flighttest.flying.mission_scripts import mission_config_path
-    from flighttest.flying.missions_config import DESCENT_KEYS, load_mission_config
+    from flighttest.flying.missions_config import DESCENT_KEYS, FlightConfig, load_mission_config
 
     heights, descents = [], []
     for mission in MISSIONS:
@@ -90,6 +93,7 @@ def mission_defaults() -> dict[str, str]:
         depth = cfg.plan.get(DESCENT_KEYS[mission])
         what = " (sweep depth)" if mission == "probe" else ""
         descents.append(f"{mission} {depth:g} m{what}" if depth is not None else f"{mission}: its script's default")
+    heights.append(f"a trajectory file {FlightConfig().start_height_m:g} m")
     return {"height": "by default " + ", ".join(heights), "descent": "by default " + ", ".join(descents)}
 
 

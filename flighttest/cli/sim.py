@@ -7,10 +7,11 @@ import argparse
 from flighttest import inputs as ip
 
 DESCRIPTION = """\
-Run the fake PX4 quadcopter: MAVLink 2 over UDP, real-time rigid-body physics, a PX4-like controller
-and a VRS/WBS disturbance whose truth (onset, cone, severity, seed) you set here, independently of
-what flighttest believes. Its first output line is `connect: udpout://127.0.0.1:P`. See
-sitl_fakes/README.md for the truth-log columns.
+Run the fake quadcopter: MAVLink 2 over UDP, real-time rigid-body physics, a PX4-like controller (or,
+--autopilot ardupilot, ArduCopter's) and a VRS/WBS disturbance whose truth (onset, cone, severity, seed)
+you set here, independently of what flighttest believes. Its first output line is
+`connect: udpout://127.0.0.1:P`, the --connect URL for flighttest fly and campaign; Ctrl-C stops it.
+See sitl_fakes/README.md for the truth-log columns.
 """
 
 # The fake's numbers within what its real-time loop and physics can run: a physics rate of 1e308 Hz
@@ -39,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "sim",
-        help="run the fake PX4 quadcopter with VRS/WBS physics",
+        help="run the fake quadcopter (PX4 or ArduCopter) with VRS/WBS physics",
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -5,10 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from rich import box
 from rich.table import Table
 
 from flighttest.console import console, print_json
 from flighttest.model.profiles import load_profile, scan_profiles
+
+NAME_FITS_80 = 24
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,8 +38,10 @@ def cmd_list(args: argparse.Namespace) -> int:
     if args.json:
         print_json([p.summary() for p in profiles])
         return 0
-    t = Table(title="Vehicle profiles")
-    for col in ("name", "mass kg", "rotor Ø m", "v_h m/s", "w_allow m/s", "w_allow/v_h", "cone °"):
+    # headers on two lines (the quantity, then its unit): at 80 columns nothing is cut for names up to
+    # NAME_FITS_80 characters (the shipped ones reach 15)
+    t = Table(title="Vehicle profiles", box=box.SIMPLE_HEAD, title_justify="left")
+    for col in ("name", "mass\nkg", "rotor Ø\nm", "v_h\nm/s", "w_allow\nm/s", "w_allow\n/ v_h", "cone\n°"):
         t.add_column(col, justify="left" if col == "name" else "right", no_wrap=True)
     for p in profiles:
         s = p.summary()
@@ -60,8 +65,8 @@ def cmd_show(args: argparse.Namespace) -> int:
         print_json(s)
         return 0
     t = Table(title=f"Vehicle '{p.name}'", show_header=False)
-    t.add_column("field")
-    t.add_column("value")
+    t.add_column("field", no_wrap=True)
+    t.add_column("value", overflow="fold")  # a long path folds onto the next line, never cut
     for key, value in s.items():
         t.add_row(key, _shown(value))
     console.print(t)

@@ -53,7 +53,7 @@ def prepare_flight(
     yes: bool = False,
     dry_run: bool = False,
     confirm: Callable[[PreflightResult], bool] | None = None,
-    print_fn: Callable[[Any], None] = print,
+    print_fn: Callable[[Any], None] | None = None,
     show_panel: bool = False,
     module: ModuleType | None = None,
     names: Mapping[str, str] = KEYWORD_NAMES,
@@ -65,10 +65,14 @@ def prepare_flight(
     ``geofence_radius_m``, ``max_descent_mps`` (probe) and ``land`` override it. ``wind_ned_mps`` (with
     ``wind_sd_mps``, its 1 σ) is a wind measured on the ground: a prior for the guard. Without ``yes`` the
     flight asks ``confirm(preflight)`` before arming and refuses to arm without a terminal."""
+    from flighttest.console import console
     from flighttest.flying.link import check_connection, check_url
     from flighttest.flying.runner import check_duration
     from flighttest.model.profiles import load_profile
     from flighttest.model.trajectory import Trajectory
+
+    # the progress lines and the preflight table (a rich Table: plain print() would show its repr)
+    print_fn = print_fn or console.print
 
     check_url(connect)
     _check_numbers(names, height_m=height_m, descent_m=descent_m, min_alt_m=min_alt_m,

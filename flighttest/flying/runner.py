@@ -356,6 +356,8 @@ class MissionRunner:
             extra.update(final_armed=st.armed, final_landed_state=st.landed_state, final_alt_m=st.alt_m,
                          **final_mode(st.flight_mode, st.armed, self.watch.mode_while_armed))  # fmt: skip
         extra["horizontal_error_m"] = self.watch.horizontal_error_m
+        extra["main_descent"] = main = self._main_descent()
+        extra["planned_descent_s"] = main["planned_descent_s"]
         if self.link is not None:
             extra.update(self.watch.wind().describe())
         if self.ladder.history:
@@ -366,6 +368,32 @@ class MissionRunner:
         if self.preflight is not None:
             extra["preflight"] = self.preflight.to_dict()
         return FlightOutcome(outcome, reason, self.watch.descent_time_s, str(self.log.dir), extra)
+
+    def _main_descent(self) -> dict[str, Any]:
+        """The main descent as the live timer saw it (``flighttest.analysis.descent_time``: what the
+        analysis of this folder gives too), times on the log's clock, beside the plan timed by the same rule."""
+        df = self.traj.df
+        planned = dtime.planned_descent(df["t_s"], df["n_m"], df["e_m"], df["d_m"], df["vd_mps"])
+        timer = self.watch.descent_timer
+        flown = timer.flown() if timer is not None else None
+        if self.t_stream_start is None:
+            note = "the flight never began its descent"
+        elif timer is None:
+            note = "the trajectory returns to its start: no descent to time"
+        elif flown is None or flown.reached is None:
+            after = Phase.LAND if self.fl.land else Phase.HOLD  # what ends the descent's phases (window())
+            note = dtime.not_reached(timer.rule, "the abort" if self.ladder.history else f"the {after} phase")
+        else:
+            note = None
+        t0, unix0 = self.log.times(self.t_stream_start) if self.t_stream_start is not None else (0.0, None)
+        rec = dtime.main_descent_record(flown, planned, start_unix_s=unix0, ground_alt_m=self.ground_alt_m,
+                                        note=note)  # fmt: skip
+        if flown is not None:  # the log's clock, as events.jsonl has it
+            rec["start_s"], rec["end_s"] = round(t0, 3), round(t0 + flown.duration_s, 3)
+        # samples are timed here as they arrive (tens of ms of jitter on a loaded machine, 0.15 m/s on a 0.2 s
+        # rate); the analysis has the vehicle's own clock in the tlog and gives the max rate
+        rec["max_rate_mps"] = None
+        return rec
 
     async def _run_linked(self) -> FlightOutcome:
         req = self.req

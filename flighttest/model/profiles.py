@@ -454,6 +454,29 @@ def load_profile(name_or_path: str | Path) -> VehicleProfile:
     return load_profile_file(cands[s])
 
 
+# what a flight's meta.json vehicle summary fixes for judging it later: v_h (mass, rotors, air) and the guard
+# region (w_allow, cone, margin); the rest of the profile (inertia, rates) does not enter the analysis
+AS_FLOWN_FIELDS = ("mass_kg", "n_rotors", "rotor_diameter_m", "air_density_kgpm3")
+AS_FLOWN_VRS_FIELDS = ("w_allow_mps", "cone_deg", "margin_mps")
+
+
+def profile_as_flown(profile: VehicleProfile, summary: Any, where: str = "meta.json") -> VehicleProfile:
+    """``profile`` with the figures a flight flew with (``summary``: its ``summary()`` as ``meta.json``
+    holds it): a profile since rewritten (``identify --write-profile``) must not re-judge old flights.
+    A summary without these figures, or with one out of range, is one ``FlighttestError`` line."""
+    if not isinstance(summary, dict):
+        raise FlighttestError(f"{where}: no vehicle summary to judge the flight with")
+    top = {k: _check_value(where, f"vehicle.{k}", summary[k], {**_TOP_REQUIRED, **_TOP_OPTIONAL}[k])
+           for k in AS_FLOWN_FIELDS if k in summary}  # fmt: skip
+    vrs = {k: _check_value(where, f"vehicle.{k}", summary[k], _VRS_FIELDS[k]) for k in AS_FLOWN_VRS_FIELDS
+           if k in summary}  # fmt: skip
+    if "w_allow_mps" not in vrs:
+        raise FlighttestError(f"{where}: the vehicle summary has no w_allow_mps to judge the flight with")
+    source = summary.get("w_allow_source")
+    vrs["source"] = f"as flown ({where}): {source}" if isinstance(source, str) and source else f"as flown ({where})"
+    return replace(profile, **top, vrs=replace(profile.vrs, **vrs))
+
+
 def profile_to_dict(profile: VehicleProfile) -> dict[str, Any]:
     d = asdict(profile)
     d.pop("path")
