@@ -217,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
         raise FlighttestError(f"--truth-log {args.truth_log}: cannot write ({exc.strerror})") from None
     truth_hz = args.truth_rate_hz or args.physics_hz
     if args.autopilot == "ardupilot":
-        # imported here: the PX4 personality's start-up stays what it was
+        # imported here: the PX4 personality's start-up does not load ArduCopter's modules
         from sitl_fakes.ardupilot_telemetry import ArduPilotTelemetry
         from sitl_fakes.ardupilot_vehicle import FakeArduCopter
 
@@ -234,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
         signal.signal(sig, stop)
     print(f"connect: udpout://127.0.0.1:{link.port}", flush=True)
     t = cfg.truth
-    personality = " (ardupilot)" if args.autopilot == "ardupilot" else ""  # PX4's lines stay as they were
+    personality = " (ardupilot)" if args.autopilot == "ardupilot" else ""  # PX4's lines carry no tag
     print(
         f"sitl_fakes: {cfg.profile.name}{personality} v_h={cfg.profile.v_h_mps:.3f} m/s "
         f"truth onset={t.onset_mps:.3f} m/s "

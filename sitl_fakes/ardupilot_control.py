@@ -36,10 +36,11 @@ own quad, which the reference flew — with a perfect estimate; in brackets the 
   (fake 1.84 [1.67]), descent peaks at 1.31 m/s (fake 1.36 [1.34]).
 - ``probe-completed`` (48.6 s sweep, 1.45 m/s planned): peak descent 1.53 m/s (fake 1.53 [1.59]), height
   error ≤ 0.11 m (fake 0.11 [0.14] m).
-- A vertical of this project on ArduCopter SITL (bench/RESULTS.md, its DataFlash PSCD/PIDA/SIM2): GUIDED's
+- A vertical of this project on ArduCopter SITL (its DataFlash PSCD/PIDA/SIM2; bench/RESULTS.md,
+  "This change: the vertical ramps its acceleration at the jerk; the fake's vertical loop is ArduCopter's"): GUIDED's
   desired descent peaked at 0.55 m/s on a 0.3 m/s plan whose acceleration stepped, and the vehicle peaked
-  at 0.55 too, 0.2 s later (fake, the same setpoints: 0.61; with an ideal acceleration loop 0.67). Its EKF3
-  stayed within 0.015 m/s of the truth (``ardupilot.SITL_ESTIMATE_ERROR``).
+  at 0.55 too, 0.2 s later (fake, the same setpoints: 0.61). Its EKF3 stayed within 0.015 m/s of the truth
+  (``ardupilot.SITL_ESTIMATE_ERROR``).
 - BRAKE's vertical shaping (ref. ``vertical-guard-abort``): the desired climb rate decays at 0.70 per second
   (shaper gain jerk/accel = 5/7.5 = 0.67 per second).
 """
@@ -434,9 +435,8 @@ class VerticalAccelPid:
     Its P (0.05 of throttle per m/s² by default, where a 0.39 hover throttle gives 25 m/s² per unit)
     reaches only about half of a step in the target at once; the integrator brings the rest within a few
     tenths of a second, behind the motors' 2 Hz throttle filter. That is why ArduCopter SITL's descent
-    follows GUIDED's shaped velocity 0.2 s late and peaks where that velocity peaked (0.55 m/s in the
-    vertical of bench/RESULTS.md's ArduCopter section); the fake with this PID peaks at 0.61 on the same
-    setpoints, with an ideal acceleration loop at 0.67."""
+    follows GUIDED's shaped velocity 0.2 s late and peaks where that velocity peaked (bench/RESULTS.md,
+    "This change: the vertical ramps its acceleration at the jerk; the fake's vertical loop is ArduCopter's")."""
 
     def __init__(self, p: Callable[[str], float]):
         self.p = p

@@ -81,7 +81,8 @@ def _iso(lin: float, quad: float, momentum: bool, source: str) -> TruthDrag:
     return TruthDrag((lin, lin, lin), (quad, quad, quad), momentum, source)
 
 
-# Each shipped airframe's truth. Figures against the reference flights: sitl_fakes/README.md, bench/RESULTS.md.
+# Each shipped airframe's truth. Figures against the reference flights: sitl_fakes/README.md, and bench/RESULTS.md,
+# "The fake in wind: its own drag, turbulence, and no wind report by default (issue 21)".
 TRUTH_DRAG: dict[str, TruthDrag] = {
     # PX4 SIH (simulator_sih/sih.cpp): −SIH_KDV·v_air, SIH_KDV 1 N per m/s, linear and isotropic; the IMU of
     # ../shared/wind_sitl's PX4 flights fits 1.000 /s on 1 kg with no quadratic term

@@ -6,11 +6,11 @@ controller does too and its telemetry reports it; the truth log keeps the truth.
 
 Measured on those flights (estimate − SIH's ground truth, in the air): velocity errors of 0.09–0.15
 m/s (vertical) and 0.12–0.29 m/s (horizontal) standard deviation, correlated over about 1.5 s
-(vertical) and 3.5 s (horizontal). On 30 flights of our own on PX4 SITL (bench/RESULTS.md) the
-vertical error was larger and slower: 0.09–0.22 m/s (median 0.15), correlated over 1.0–5.7 s (median
-2.8 s), 0.4–0.6 m/s at its 99th percentile in the long vertical descents — enough for the EKF to
-trail a slow descent by 0.35 m. The vertical figures below are those. Position offsets: 0.3–0.7 m in
-height, 0.1–0.2 m horizontally, drifting over tens of seconds.
+(vertical) and 3.5 s (horizontal). The vertical figures below are those of 30 flights of our own on
+PX4 SITL, larger and slower (median 0.15 m/s over 2.8 s): enough for the EKF to trail a slow descent
+(bench/RESULTS.md, "This change: the catch-up limit, the helix's thrust-rate bound, settling on the
+position's rate."). Position offsets: 0.3–0.7 m in height, 0.1–0.2 m horizontally, drifting over tens
+of seconds.
 
 Each error is a seeded Ornstein–Uhlenbeck process; the position offset is a slow one (smoothed by a
 first-order lag) plus the velocity error integrated with a leak (GPS pulls the EKF back within

@@ -88,8 +88,8 @@ class ScriptedAutopilot:
     takeoff_speed_mps: float = 1.0
     land_speed_mps: float = 0.7
     disarm_after_s: float = 0.5  # on the ground in Land, after a flight, PX4 disarms after this
-    # from the takeoff command until the vehicle climbs: PX4 SITL spools up and ramps for seconds (its land
-    # detector said airborne 1.8 s after the command, 5 cm up 4.2 s after: bench/RESULTS.md, issue 24)
+    # from the takeoff command until the vehicle climbs: PX4 SITL spools up and ramps for seconds
+    # (bench/RESULTS.md, "Flight-safety review on real firmware (issue 24)")
     spool_up_s: float = 1.0
     preflight_disarm_s: float = 10.0  # armed on the ground without a takeoff: COM_DISARM_PRFLT / DISARM_DELAY
     position_gain_per_s: float = 1.0

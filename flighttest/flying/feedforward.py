@@ -3,16 +3,16 @@
 A plan gives position, velocity and the *net* acceleration of the vehicle. PX4's position controller
 (``PositionControl``, the firmware of ``../shared/px4_sih``; reproduced in ``sitl_fakes.control``)
 does apply the acceleration flighttest sends as feed-forward, but turns it into a thrust vector its
-own way, and its attitude follows that vector late. Measured on PX4 SITL and on the fake calibrated
-against it (``bench/RESULTS.md``, "Flying the plan PX4 flies"), three corrections make the vehicle fly
-the plan's thrust vector when the plan needs it:
+own way, and its attitude follows that vector late. Three corrections make the vehicle fly the plan's
+thrust vector when the plan needs it (measured on PX4 SITL and on the fake calibrated against it:
+``bench/RESULTS.md``, "Flying the plan PX4 flies: helix and vertical on PX4 SITL and on the fake (issue 11)"):
 
 1. **Lead** (``lead_s``): PX4 has no tilt feed-forward; its tilt trails a new thrust direction by
    ``1/MC_ROLL_P`` (0.25 s on SIH) plus the rate loop and motors. The *horizontal* acceleration sent
    at ``t`` is the plan's at ``t + lead_s``, so the tilt arrives when the plan needs it. Not the
-   vertical one: collective thrust follows within the motors' 50 ms, and a led plunge made PX4 SITL
-   sink 0.2 m/s faster than planned while its tilt still lagged. Position and velocity are not led
-   (the position loop would pull ahead).
+   vertical one: collective thrust follows within the motors' 50 ms, and a led plunge sinks faster
+   than planned while the tilt still lags. Position and velocity are not led (the position loop would
+   pull ahead).
 2. **Drag** (``drag_per_s``): PX4 assumes thrust and gravity are all that act; a vehicle with linear
    drag (SIH: ``SIH_KDV`` N per m/s) needs ``drag/m · v_air`` more. Without it the velocity loop
    makes up the loss late, at the helix's speeds by tenths of a m/s.
@@ -101,14 +101,13 @@ class CatchUpLimit:
     """How far below the vehicle a down position setpoint may be sent (PX4 and ArduPilot both add
     their vertical position gain × the position error to the plan's descent rate).
 
-    On PX4 SITL the EKF's vertical velocity runs 0.1–0.4 m/s ahead of the truth for seconds while its
-    height follows the GNSS height, so the estimate falls 0.35 m behind a slow descent and PX4
-    descends 0.35 m/s faster than planned — by its own estimate, which the guard judges: every
-    vertical baseline it aborted there did so (bench/RESULTS.md). So the commanded descent rate,
-    plan plus catch-up, stays within ``max(plan + excess_mps, floor_mps)``: a little over the plan
-    where it descends fast, and up to ``floor_mps`` (a rate far inside the cone at rest) where it
-    holds or barely descends, so an end hold is still reached promptly. Climbing back to the plan is
-    never limited.
+    An EKF whose vertical velocity runs ahead of the truth falls behind a slow descent, and the
+    autopilot turns that position error into a descent faster than planned, by the estimate the guard
+    judges (PX4 SITL: bench/RESULTS.md, "This change: the catch-up limit, the helix's thrust-rate
+    bound, settling on the position's rate."). So the commanded descent rate, plan plus catch-up, stays
+    within ``max(plan + excess_mps, floor_mps)``: a little over the plan where it descends fast, and up
+    to ``floor_mps`` (a rate far inside the cone at rest) where it holds or barely descends, so an end
+    hold is still reached promptly. Climbing back to the plan is never limited.
     """
 
     excess_mps: float = 0.1

@@ -40,25 +40,18 @@ ABORT = "abort"
 OBSERVE = "observe"
 
 # -- Stale telemetry ---------------------------------------------------------------------------------
-# Measured on PX4 SITL (the six reference flights; bench/bench_telemetry.py, bench/RESULTS.md
-# "Telemetry a real link delivers"): each state stream arrives every 20 ms (p50), p99 22-34 ms,
-# p99.9 24-57 ms, but a healthy link delivers nothing for up to 173 ms at a time (position-velocity
-# and attitude merged, as the guard counts them; 209 ms for one stream alone) when the machine or
-# the flying process stalls: PX4 had stamped those messages at most 40 ms apart, they arrive late and
-# together. The longest gap in an offboard phase was 94 ms (the hover in which the old rule aborted
-# probe-stale-abort; 52 ms in the other flights), in PX4's takeoff 64 ms, in its Land 173 ms. The
-# old limit, 3 periods (60 ms), aborted flights on such links. The limit is a time now:
+# A healthy link goes quiet for up to 173 ms when the machine or the flying process stalls, so the limit
+# is a time with room over that, by phase (bench/RESULTS.md, "The stale rule"):
 #
 # - while flighttest flies the vehicle in offboard (OFFBOARD_PHASES), no state sample for
-#   STALE_AFTER_S aborts: 1.45× the longest gap a healthy link showed anywhere, 2.6× the longest in
-#   offboard; with the ticker's period on top (the telemetry period, 20 ms) a dead link is acted on
-#   within 0.27 s, inside the 0.3 s budget of issue 11 (at the helix's 1.3 m/s, 0.35 m flown blind);
+#   STALE_AFTER_S aborts; with the ticker's period on top (the telemetry period, 20 ms) a dead link is acted
+#   on within 0.27 s, inside the 0.3 s budget of issue 11 (at the helix's 1.3 m/s, 0.35 m flown blind);
 # - where PX4 flies by itself (AUTOPILOT_PHASES: arming, its takeoff, its Land, the Hold that ends
 #   a --no-land flight) flighttest sends nothing the vehicle depends on, so a gap is logged (action
 #   OBSERVE) and only one longer than AUTOPILOT_STALE_S acts (the runner starts the ladder at Hold;
-#   at Land while landing). 1 s: PX4's own offboard-loss timeout (COM_OF_LOSS_T) and longer than
-#   any stall seen (5.8× the worst); at PX4's takeoff climb (MPC_TKO_SPEED 1.5 m/s) 1.5 m
-#   unobserved, which the takeoff height leaves room for;
+#   at Land while landing). 1 s: PX4's own offboard-loss timeout (COM_OF_LOSS_T), well over any stall
+#   seen; at PX4's takeoff climb (MPC_TKO_SPEED 1.5 m/s) 1.5 m unobserved, which the takeoff height
+#   leaves room for;
 # - ``stale_periods`` (telemetry periods) is the older spelling of the offboard limit: when given it
 #   sets ``stale_after_s`` = ``stale_periods`` × the telemetry period (``GuardLimits``: the one place);
 # - a velocity is judged only with an attitude at most ``stale_after_s`` older (a level attitude kept from
@@ -67,8 +60,8 @@ OBSERVE = "observe"
 # - a stream that keeps arriving but ever later is stale too: its lateness is how far the attitude's arrival
 #   time less its vehicle timestamp has grown, at the stream's own cadence, above its least over the last
 #   LATENCY_WINDOW_S. A step that comes with a gap in the arrivals (more than LATENCY_STEP_S) is the gap's,
-#   which the rule above judges: a simulator starved by its host stops its own clock for as long
-#   (ArduCopter SITL on a loaded 2-core machine: 0.36 s, bench/RESULTS.md), and its data is as fresh as ever.
+#   which the rule above judges: a simulator starved by its host stops its own clock for as long, and its
+#   data is as fresh as ever (bench/RESULTS.md, "The stale rule").
 STALE_AFTER_S = 0.25
 AUTOPILOT_STALE_S = 1.0
 # the runner's phases (flighttest.flying.runner set_phase) in which flighttest streams offboard setpoints …
@@ -174,8 +167,8 @@ def predicted_blade_velocity_mps(
 
     Arguments in the order of every rotation helper (``flighttest.model.frames.blade_velocity_mps``):
     the velocity, then what sets the attitude (here the commanded acceleration, there the quaternion),
-    then the wind. ``horizon_s`` is keyword-only so that a call written for the order this function
-    once had (wind before the acceleration, ten positional arguments) fails rather than swapping them."""
+    then the wind. ``horizon_s`` is keyword-only so that a call with the arguments in another order fails
+    rather than swapping them."""
     van = vn + an_cmd * horizon_s - wn
     vae = ve + ae_cmd * horizon_s - we
     vad = vd + ad_cmd * horizon_s - wd
@@ -385,7 +378,8 @@ class Guard:
         _, w, u, _ = lim.region.check(s.vn_mps, s.ve_mps, s.vd_mps, qw, qx, qy, qz, s.wn_mps, s.we_mps, s.wd_mps)
         # a horizon ahead, from the vehicle's own response: (w, u) extrapolated along their measured trend
         # over the last trend_window_s. Not from the command: a real autopilot's tilt and descent trail a
-        # demanding plan by tenths of a second (bench/RESULTS.md, "Flying the plan PX4 flies").
+        # demanding plan by tenths of a second (bench/RESULTS.md,
+        # "Flying the plan PX4 flies: helix and vertical on PX4 SITL and on the fake (issue 11)").
         w, u = float(w), float(u)
         wp, up = self._extrapolate(s.t_s, w, u)
         # both judged at the worst air the wind's uncertainty allows; w and u are logged as estimated

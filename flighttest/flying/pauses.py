@@ -2,11 +2,10 @@
 
 One asyncio loop runs everything that flies: telemetry listeners, the guard, the 50 Hz setpoint
 streamer and the stale-telemetry ticker. Whatever stops that loop stops all of them, and what
-stopped it in the reference flights on PX4 (``bench/RESULTS.md``, "Telemetry") was CPython's cyclic
-garbage collector. By the time a flight arms, the process holds about 85 000 objects the collector
-tracks (pandas, numpy, MAVSDK, CasADi, the plan, the profile); a *full* collection walks them all
-and takes tens to hundreds of milliseconds (100-340 ms on the 2-core dev machine under load; the
-issue measured 16-56 ms pauses in flight on another), and CPython starts one on its own
+stopped it in the reference flights on PX4 was CPython's cyclic garbage collector. By the time a
+flight arms, the process holds about 85 000 objects the collector tracks (pandas, numpy, MAVSDK,
+CasADi, the plan, the profile); a *full* collection walks them all and takes tens to hundreds of
+milliseconds (``bench/RESULTS.md``, "The flying process's own pauses"), and CPython starts one on its own
 whenever enough objects have survived the younger collections — at a moment nobody chose, a
 descent included. Young collections only walk the objects made since the last one: well under a
 millisecond.

@@ -82,8 +82,8 @@ class HelixPlanConfig:
     trajectory: str | None = None  # a planned file (NAME.csv + NAME.json beside the config), flown instead
     # helices planned ahead for winds up to [flight] max_wind_mps in these steps (0: none, calm only), each
     # clear of the guard region for any wind within wind_radius_mps of its own (flighttest.planner.wind_plans):
-    # half a step; the start hover judges each at the wind it measures, with its uncertainty. A radius of 1.25
-    # (half a step + 2.45 σ of 0.3 m/s) did not converge for arducopter_sitl (bench/RESULTS.md, "Plans for the wind")
+    # half a step, which keeps the plans solvable; the start hover judges each at the wind it measures, with its
+    # uncertainty (bench/RESULTS.md, "Plans for the wind")
     wind_step_mps: float = 1.0
     wind_radius_mps: float = 0.5
     # the calm plan keeps clear for any wind within this of calm: the guard's radius in still air (2.45 σ of

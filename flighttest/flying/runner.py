@@ -623,8 +623,7 @@ class MissionRunner:
         self.set_phase(Phase.TAKEOFF)
         with contextlib.suppress(Exception):
             # ArduCopter's takeoff ends where asked and holds there: asked for the start height it is still
-            # climbing fast at the handover, and GUIDED's shaping of the climb's first setpoint (where the
-            # vehicle is, at rest) overshoots it, then sinks back (its fake, bench/RESULTS.md)
+            # climbing fast at the handover and overshoots (bench/RESULTS.md, "The fake's ArduCopter personality")
             await link.set_takeoff_altitude(min(H, HANDOVER_ALT_M) if self.rules.takeoff_to_handover else H, 5.0)
         await self._ground_command(link.takeoff(10.0), 10.0)
         handover_m = min(H, HANDOVER_ALT_M)

@@ -2,8 +2,8 @@
 
 Slow means the estimated velocity *or* the estimated position's own rate over ``window_s`` is below
 ``speed_mps``. The position's rate is there because an EKF's velocity can be biased for seconds while
-its position holds: on PX4 SITL EKF2's vertical velocity read −0.25 m/s for 10 s while its height
-(and the simulator's truth) stayed put, and a hover judged on velocity alone never settled.
+its position holds, and a hover judged on velocity alone then never settles (PX4 SITL: bench/RESULTS.md,
+"This change: the catch-up limit, the helix's thrust-rate bound, settling on the position's rate.").
 """
 
 from __future__ import annotations
