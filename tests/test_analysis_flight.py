@@ -92,4 +92,6 @@ def test_flown_log_matches_truth(fake_vehicle_factory, tmp_path, mission):
     dt = np.diff(t, append=t[-1])
     assert main["time_inside_s"] == pytest.approx(dt[sel & (m < 0)].sum(), abs=0.1)
     assert main["time_near_s"] == pytest.approx(dt[sel & (m >= 0) & (m < 0.3)].sum(), abs=0.15)
-    assert main["min_margin_mps"] == pytest.approx(m[sel].min(), abs=0.03)
+    # judged with flighttest's own wind estimate (the fake reports none), which moves the margin by at most its
+    # error: within its stated 1 σ (as tests/test_wind_sitl.py on real firmware)
+    assert main["min_margin_mps"] == pytest.approx(m[sel].min(), abs=max(0.03, a.summary()["wind_sd_mps"]))

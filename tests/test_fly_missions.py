@@ -314,7 +314,11 @@ def test_helix_flies_on_the_sih_quadx_fake_as_on_px4_sitl(fake_vehicle_factory, 
 # -- the guard ---------------------------------------------------------------------------------------
 
 
-def test_bad_trajectory_is_aborted_by_the_guard_before_the_vrs_bites(fake_vehicle_factory, tmp_path):
+def test_bad_trajectory_is_refused_in_the_start_hover_before_the_vrs_bites(fake_vehicle_factory, tmp_path):
+    """A planned file that descends at twice ``w_allow``: the start hover judges it against the guard region in
+    the air it measures (flighttest.flying.runner, ``_plan_for_wind``), refuses it and ends through Hold and
+    Land without one descending setpoint. (The guard's abort in the descent: tests/test_fly_in_wind.py and
+    the virtual-time tests.)"""
     prof = load_profile("x500")
     plan = plan_vertical(prof, height_m=2.5, w_allow_mps=2 * prof.w_allow_mps, margin_mps=0.0, accel_fraction=0.5)
     bad = tmp_path / "bad_vertical"
@@ -324,21 +328,15 @@ def test_bad_trajectory_is_aborted_by_the_guard_before_the_vrs_bites(fake_vehicl
     cfg.write_text(tomli_w.dumps({"mission": "file", "guard": {"stale_periods": CI_STALE_PERIODS}}))
     rc, s, err = run_fly(str(bad) + ".csv", fake.url, tmp_path, "--height", "5", "--config", str(cfg))
     assert rc == 1, err
-    assert s["outcome"] == "aborted" and s["abort_verdict"] in ("violation", "predicted", "marginal")
+    assert s["outcome"] == "aborted" and s["abort_reason"].startswith("no plan clears the guard region"), s
     assert s["final_mode"] in ("HOLD", "LAND")
-    assert [r["rung"] for r in s["ladder"]][:2] == ["RECOVER", "HOLD"]
+    assert s["ladder"][0]["rung"] == "HOLD"
     assert_complete_log(s["log_dir"])
+    assert not any(e["event"] == "stream_start" for e in events(s["log_dir"]))
     tr = truth(fake)
     st = tr[tr["kind"] == "state"]
-    # the vehicle never got deep enough into the true VRS to feel it
-    assert st["dT_T"].abs().max() < 0.05
-    assert st["depth_n"].max() < 0.05
+    assert st["dT_T"].abs().max() < 0.05 and st["depth_n"].max() < 0.05
     assert_safe_end(tr)
-    # the descent was commanded, and the last setpoint the vehicle got arrests the sink (vd ≤ 0); the
-    # guard acts on its prediction from the commanded ramp, so it may stop it after a few setpoints
-    # (seen: 0.098 m/s on a loaded CI machine)
-    vd_sp = pd.to_numeric(tr.loc[tr["kind"] == "setpoint", "sp_vd_mps"], errors="coerce")
-    assert vd_sp.max() > 0.03 and vd_sp.dropna().iloc[-1] <= 0
 
 
 # -- faults ------------------------------------------------------------------------------------------

@@ -110,3 +110,20 @@ def test_a_cache_that_cannot_be_written_still_gives_the_plans(tmp_path, monkeypa
     assert len(helix_plans_for_winds(prof, PLAN, [1.0], 1.25, solver)) == 1
     assert len(helix_plans_for_winds(prof, PLAN, [1.0], 1.25, solver)) == 1
     assert solver.calls == [1.0, 1.0]
+
+
+def test_the_vehicles_tracking_margin_as_far_as_its_boundary_leaves_the_hover_room():
+    import dataclasses
+
+    from flighttest.planner.tracking import HOVER_ROOM_MPS, guard_margin_for
+
+    x500 = load_profile("x500")
+    assert x500.tracking_margin_mps == 0.5 and guard_margin_for(x500, TrackingMargin()) == 0.5
+
+    def with_w_allow(w_mps: float):
+        return dataclasses.replace(x500, vrs=dataclasses.replace(x500.vrs, w_allow_mps=w_mps))
+
+    low = with_w_allow(0.59)  # an onset identified low: room for 0.41 above the mission's 0.4
+    assert guard_margin_for(low, TrackingMargin()) == pytest.approx(0.59 - x500.vrs.margin_mps - HOVER_ROOM_MPS)
+    assert guard_margin_for(with_w_allow(0.5), TrackingMargin()) == 0.4  # never below the mission's
+    assert guard_margin_for(load_profile("arducopter_sitl"), TrackingMargin()) == 0.4  # no tracking margin of its own

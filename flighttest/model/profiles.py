@@ -109,6 +109,9 @@ class VehicleProfile:
     # linear drag, N per m/s of air-relative velocity (PX4 SIH's SIH_KDV model; 0 = none). The
     # autopilot's feed-forward knows nothing of it, so flighttest adds what it costs (feedforward.py)
     drag_n_per_mps: float = 0.0
+    # how far inside the guard's bound a helix must be planned for this vehicle's tracking, at least (the
+    # mission's guard_margin_mps is the other floor: plans keep the larger; flighttest.planner.tracking)
+    tracking_margin_mps: float = 0.0
     vrs: VrsBoundary = field(default_factory=VrsBoundary)
     # the autopilot's setpoint-shaping limits the plans must fit within (None: no table, none apply)
     autopilot: AutopilotLimits | None = None
@@ -202,6 +205,7 @@ class VehicleProfile:
             "w_allow_source": self.w_allow_source,
             "cone_deg": self.vrs.cone_deg,
             "margin_mps": self.vrs.margin_mps,
+            "tracking_margin_mps": self.tracking_margin_mps,
             "autopilot": self.autopilot.summary() if self.autopilot is not None else None,
             "drag": self.drag.to_table() if self.drag is not None else None,
         }
@@ -235,6 +239,7 @@ _TOP_OPTIONAL: dict[str, Any] = {
     "max_climb_mps": Range(0.0, 50.0, "m/s", lo_open=True),
     "yaw_moment_per_thrust_m": Range(0.0, 1.0, "m", lo_open=True),
     "drag_n_per_mps": Range(0.0, 1000.0, "N·s/m"),
+    "tracking_margin_mps": Range(0.0, 5.0, "m/s"),
 }
 _VRS_FIELDS: dict[str, Any] = {
     "cone_deg": Range(0.0, 90.0, "°", lo_open=True, hi_open=True),

@@ -78,6 +78,18 @@ class TrackingMargin:
         return tilt
 
 
+# What the hover before the descent keeps below w_allow at least: a plan whose margins leave less has no start
+HOVER_ROOM_MPS = 0.08
+
+
+def guard_margin_for(profile: VehicleProfile, margin: TrackingMargin) -> float:
+    """How far inside the guard's bound the helix is planned: the mission's ``guard_margin_mps``, raised to the
+    vehicle's ``tracking_margin_mps`` as far as its ``w_allow`` leaves the start hover room for (an onset
+    identified low takes the mission's margin rather than no helix; bench/RESULTS.md, "Plans for the wind")."""
+    room = profile.w_allow_mps - profile.vrs.margin_mps - HOVER_ROOM_MPS
+    return max(margin.guard_margin_mps, min(profile.tracking_margin_mps, room))
+
+
 def helix_problem_for_flight(
     profile: VehicleProfile,
     height_m: float,
@@ -94,7 +106,7 @@ def helix_problem_for_flight(
     constraint = VelocityConstraint(
         cone_deg=profile.vrs.cone_deg,
         w_allow_mps=profile.w_allow_mps,
-        margin_mps=profile.vrs.margin_mps + margin.guard_margin_mps,
+        margin_mps=profile.vrs.margin_mps + guard_margin_for(profile, margin),
     )
     rates_dps = min(profile.max_rate_dps[:2]) * margin.rate_fraction
     p = problem_for_vehicle(
