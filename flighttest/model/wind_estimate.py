@@ -6,17 +6,16 @@ says the air-relative velocity, so ``wind = v_ned − R·v_air``.
 A three-state extended Kalman filter ``(wn, we, ε)``: the horizontal wind (the vertical wind is taken as
 zero), which wanders as a random walk (``process_sd``), and the drag's scale error ε — the vehicle drags
 (1 + ε) times its model, ε known to ``drag.rel_sd`` beforehand and constant. (Only a drag known to
-``SCALE_STATE_MAX_REL_SD``: at ±50 % the product ε·wind the linearisation drops is as large as what it keeps,
-and the filter ran 2.7 m/s off in a hover while saying 1 m/s; an assumed drag's scale stays out of the state
-and its share of ``sd_mps`` is ``rel_sd`` times the airspeed.) Each sample's measurement is
-the body-frame specific force along x and y against ``(1 + ε)·drag(Rᵀ(v − wind)) / m``. A drag model wrong
-by a factor moves every sample the same way, which no averaging removes: as a state, the filter learns ε
-where the airspeed changes under a steady wind (a helix turns it through every direction) and otherwise
-carries its uncertainty into the wind's, so a fast leg flown on a wind found in the hover neither trusts
-its own samples more than the model allows nor throws the hover's estimate away. Its measurement noise
-adapts to the innovations it sees (vibration differs by airframe by an order of magnitude), never below
-``accel_sd_mps2``. The same class runs live (``flighttest.flying.wind``) and over a log
-(``flighttest.analysis.wind``): one definition.
+``SCALE_STATE_MAX_REL_SD``: beyond it the product ε·wind the linearisation drops is as large as what it keeps;
+an assumed drag's scale stays out of the state and its share of ``sd_mps`` is ``rel_sd`` times the airspeed.)
+Each sample's measurement is the body-frame specific force along x and y against
+``(1 + ε)·drag(Rᵀ(v − wind)) / m``. A drag model wrong by a factor moves every sample the same way,
+which no averaging removes: as a state, the filter learns ε where the airspeed changes under a steady wind
+(a helix turns it through every direction) and otherwise carries its uncertainty into the wind's, so a fast
+leg flown on a wind found in the hover neither trusts its own samples more than the model allows nor throws
+the hover's estimate away. Its measurement noise adapts to the innovations it sees (vibration differs by
+airframe by an order of magnitude), never below ``accel_sd_mps2``. The same class runs live
+(``flighttest.flying.wind``) and over a log (``flighttest.analysis.wind``): one definition.
 
 ``sd_mps`` is honest about what the filter cannot see: its own covariance (the scale error's share
 included), plus what an accelerometer bias of ``accel_bias_mps2`` does to the airspeed it infers. A vehicle
@@ -37,23 +36,20 @@ from flighttest.model.frames import ned_to_body
 
 ACCEL_SD_MPS2 = 0.05  # the least noise a sample's specific force is credited with
 ACCEL_BIAS_MPS2 = 0.05  # an accelerometer's residual bias after calibration
-# the wind's wander per √s: PX4's EKF2_WIND_NSD is 0.05, ArduPilot's EK3_WIND_P_NSE 0.2. At 0.3 the estimate
-# on the fake in still air wandered ±0.25 m/s with its 1 σ at 0.2, and a helix's ε·airspeed passed for wind
-# (bench/RESULTS.md, "The wind filter's scale state"); gusts faster than this are the guard's margin
+# the wind's wander per √s, between PX4's EKF2_WIND_NSD (0.05) and ArduPilot's EK3_WIND_P_NSE (0.2); gusts
+# faster than this are the guard's margin (bench/RESULTS.md, "The wind filter's scale state")
 PROCESS_SD_MPS = 0.1
 INITIAL_SD_MPS = 5.0  # before the first sample: nothing known
 NOISE_TAU_S = 2.0  # the innovation variance's memory
-# a sample's noise until the innovations have shown it (a multicopter's IMU at hover: 0.05-0.5 m/s²); from
-# zero, the first seconds trusted each sample to 0.05 m/s² and ran 2 m/s off in 0.1 s (tests/test_wind_estimate.py)
+# a sample's noise until the innovations have shown it (a multicopter's IMU at hover: 0.05-0.5 m/s²): the first
+# samples must not be trusted to the floor (tests/test_wind_estimate.py)
 NOISE_INITIAL_MPS2 = 0.3
 SCALE_MIN = -0.9  # ε is kept above: a drag of a tenth of the model's is another vehicle
 SCALE_STATE_MAX_REL_SD = 0.2
 # ε is only considered (its uncertainty carried, its value kept: a Schmidt filter) for this long after the
-# first sample — from an unknown wind the first updates overshoot, and the linearisation traded wind for scale
-# along the hover's unseen direction (a 10 % scale error read as −15 % and 0.7 m/s of wind) — and while the
-# velocity differs from its recent mean by less than this: in a steady wind a steady velocity cannot tell
-# wind from scale, and the linearised filter drifted along what it cannot see (3.0 → 4.2 m/s in 15 s of hover
-# and landing in a virtual flight: tests/test_runner_safety.py)
+# first sample, where the first updates overshoot, and while the velocity stays within this of its recent
+# mean: a steady velocity in a steady wind cannot tell wind from scale, and the linearised filter would drift
+# along what it cannot see (tests/test_runner_safety.py, tests/test_wind_estimate.py)
 SCALE_LEARN_AFTER_S = 3.0
 SCALE_LEARN_EXCITATION_MPS = 1.0
 V_MEAN_TAU_S = 5.0  # the recent mean's memory
