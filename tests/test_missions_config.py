@@ -104,8 +104,8 @@ def test_tracking_margin_from_a_plan_table_and_its_problem():
     assert p.thrust_rate_max_mps3 == 8.0
     assert helix_problem_for_flight(prof, 5.0, 3.0, TrackingMargin(thrust_rate_max_mps3=5)).thrust_rate_max_mps3 == 5
     assert p.constraint.w_allow_mps == prof.w_allow_mps
-    # the x500's own tracking margin (0.5) above the mission's 0.4; a larger mission margin wins
-    assert p.constraint.margin_mps == pytest.approx(prof.vrs.margin_mps + 0.5)
+    # the x500's own tracking margin (0.6) above the mission's 0.4; a larger mission margin wins
+    assert p.constraint.margin_mps == pytest.approx(prof.vrs.margin_mps + 0.6)
     wide = helix_problem_for_flight(prof, 5.0, 3.0, TrackingMargin(guard_margin_mps=0.7))
     assert wide.constraint.margin_mps == pytest.approx(prof.vrs.margin_mps + 0.7)
     sih = load_profile("sih_quadx")

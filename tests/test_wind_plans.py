@@ -118,7 +118,7 @@ def test_the_vehicles_tracking_margin_as_far_as_its_boundary_leaves_the_hover_ro
     from flighttest.planner.tracking import HOVER_ROOM_MPS, guard_margin_for
 
     x500 = load_profile("x500")
-    assert x500.tracking_margin_mps == 0.5 and guard_margin_for(x500, TrackingMargin()) == 0.5
+    assert x500.tracking_margin_mps == 0.6 and guard_margin_for(x500, TrackingMargin()) == 0.6
 
     def with_w_allow(w_mps: float):
         return dataclasses.replace(x500, vrs=dataclasses.replace(x500.vrs, w_allow_mps=w_mps))
