@@ -21,11 +21,11 @@ from sitl_fakes.ardupilot import CopterMode
 from sitl_fakes.ardupilot_vehicle import FakeArduCopter
 from sitl_fakes.disturbance import VrsTruth
 from sitl_fakes.estimator import EstimateError
+from sitl_fakes.fast import PHYSICS_DT_S, FastCopter, Silent, advance
 from sitl_fakes.link import mavlink
 from sitl_fakes.truthlog import TruthLog
 from sitl_fakes.vehicle import FakeConfig
 
-PHYSICS_DT_S = 0.004
 GUIDED_POSVELACCEL = 3  # ModeGuided::SubMode numbers, as the DataFlash GUIP records log them
 GUIDED_VELACCEL = 4
 # SET_POSITION_TARGET_LOCAL_NED type masks of MAVSDK's set_position_velocity_acceleration_ned and
@@ -59,18 +59,6 @@ class GuidedResponse:
         return int(min(np.searchsorted(self.t_s, t_s), self.t_s.size - 1))
 
 
-class _Silent:
-    sysid = 1
-
-    def send(self, msg) -> None:
-        pass
-
-
-class _ReplayCopter(FakeArduCopter):
-    def now_wall(self) -> float:  # setpoints arrive on the replay's clock, not the machine's
-        return self.now
-
-
 def copter(profile: VehicleProfile, params: Mapping[str, float] | None = None,
            estimate_error: EstimateError | None = None, seed: int = 0) -> FakeArduCopter:  # fmt: skip
     """An in-process ArduCopter-personality vehicle on the ground at home, EKF ready, on a clock that
@@ -78,7 +66,7 @@ def copter(profile: VehicleProfile, params: Mapping[str, float] | None = None,
     error = estimate_error if estimate_error is not None else EstimateError().scaled(0.0)
     cfg = FakeConfig(profile=profile, truth=VrsTruth(1.0, 20.0, 0.0, seed, profile.v_h_mps), seed=seed,
                      estimate_error=error, telemetry_gap_rate_hz=0.0)  # fmt: skip
-    v = _ReplayCopter(cfg, _Silent(), TruthLog(None, 0.0), 0.0, ekf_delay_s=0.0)  # type: ignore[arg-type]
+    v = FastCopter(cfg, Silent(), TruthLog(None, 0.0), 0.0, ekf_delay_s=0.0)  # type: ignore[arg-type]
     for name, value in (params or {}).items():
         v.params[name].value = value
     return v
@@ -99,14 +87,6 @@ def hovering(v: FakeArduCopter, pos_ned: tuple[float, float, float]) -> FakeArdu
     v.ekf_ready = True
     v.set_mode(CopterMode.GUIDED, "test")
     return v
-
-
-def advance(v: FakeArduCopter, duration_s: float, dt_s: float = PHYSICS_DT_S, each=None) -> None:
-    """Step ``v`` for ``duration_s`` of its own clock; ``each(v)`` after every step."""
-    for _ in range(math.ceil(duration_s / dt_s)):
-        v.step(dt_s, v.now + dt_s)
-        if each is not None:
-            each(v)
 
 
 def replay_guided(

@@ -41,12 +41,12 @@ class Silent:
         pass
 
 
-class _FastPx4(FakePx4):
+class FastPx4(FakePx4):
     def now_wall(self) -> float:  # messages arrive on the vehicle's clock
         return self.now
 
 
-class _FastCopter(FakeArduCopter):
+class FastCopter(FakeArduCopter):
     def now_wall(self) -> float:
         return self.now
 
@@ -70,10 +70,10 @@ def vehicle(profile: VehicleProfile | str, autopilot: str = "px4", *, wind_ned=(
                      seed=seed, estimate_error=error, telemetry_gap_rate_hz=0.0, **extra)  # fmt: skip
     log = TruthLog(truth_log, 0.0)
     if autopilot == "ardupilot":
-        v: FakePx4 = _FastCopter(cfg, Silent(), log, 0.0, ekf_delay_s=0.0)  # type: ignore[arg-type]
+        v: FakePx4 = FastCopter(cfg, Silent(), log, 0.0, ekf_delay_s=0.0)  # type: ignore[arg-type]
         telemetry: Telemetry = ArduPilotTelemetry(v, cfg.telemetry_hz, 0.0)
     elif autopilot == "px4":
-        v = _FastPx4(cfg, Silent(), log, 0.0)  # type: ignore[arg-type]
+        v = FastPx4(cfg, Silent(), log, 0.0)  # type: ignore[arg-type]
         telemetry = Telemetry(v, cfg.telemetry_hz, 0.0)
     else:
         raise ValueError(f"autopilot must be px4 or ardupilot (got {autopilot!r})")
@@ -120,4 +120,4 @@ def advance(v: FakePx4, duration_s: float, dt_s: float = PHYSICS_DT_S, each=None
             each(v)
 
 
-__all__ = ["PHYSICS_DT_S", "Silent", "advance", "hover_at", "vehicle"]
+__all__ = ["PHYSICS_DT_S", "FastCopter", "FastPx4", "Silent", "advance", "hover_at", "vehicle"]
