@@ -110,6 +110,7 @@ class Telemetry:
         self.gaps = 0
         self._imu_rng = random.Random(cfg.seed * 15485863 + 11)
         self._imu_noise = cfg.imu_noise_mps2
+        self._imu_bias = cfg.imu_bias_mps2
 
     # -- scheduling ----------------------------------------------------------------------------------
     def can_send(self, msg_id: int) -> bool:
@@ -289,13 +290,14 @@ class Telemetry:
 
     def specific_force_mps2(self) -> tuple[float, float, float]:
         """The accelerometer: the body's specific force (thrust and drag over the mass, −g on the ground) with
-        the autopilot's noise."""
+        the autopilot's noise and the IMU's bias."""
         s = self.v.body.state
         n = self._imu_noise
+        bx, by, bz = self._imu_bias
         if n <= 0.0:
-            return s.fx_mps2, s.fy_mps2, s.fz_mps2
+            return s.fx_mps2 + bx, s.fy_mps2 + by, s.fz_mps2 + bz
         g = self._imu_rng.gauss
-        return s.fx_mps2 + n * g(0.0, 1.0), s.fy_mps2 + n * g(0.0, 1.0), s.fz_mps2 + n * g(0.0, 1.0)
+        return s.fx_mps2 + bx + n * g(0.0, 1.0), s.fy_mps2 + by + n * g(0.0, 1.0), s.fz_mps2 + bz + n * g(0.0, 1.0)
 
     def highres_imu(self):
         s = self.v.body.state

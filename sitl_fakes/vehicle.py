@@ -34,6 +34,9 @@ FORCE_ARM_MAGIC = 21196
 # PX4 SIH's accelerometer as HIGHRES_IMU carries it (../shared/wind_sitl: 0.068 m/s² per axis, white, in the air
 # and on the ground; SIH adds 0.1 m/s² of Gaussian noise to the specific force and PX4 filters it)
 PX4_IMU_NOISE_MPS2 = 0.07
+# a calibrated accelerometer's residual bias along body x, y, z (both SITLs have none; a real IMU keeps a few
+# hundredths of a m/s² after calibration): flighttest's wind filter must learn it, not assume it away
+IMU_BIAS_MPS2 = (0.04, -0.03, 0.0)
 
 # MAV_RESULT
 ACCEPTED, TEMP_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
@@ -55,6 +58,7 @@ class FakeConfig:
     gust_tau_s: float | None = None  # one correlation time for the turbulence; None: Dryden's (sitl_fakes.wind)
     truth_drag: TruthDrag | None = None  # None: the airframe's (sitl_fakes.drag.TRUTH_DRAG)
     imu_noise_mps2: float = PX4_IMU_NOISE_MPS2  # HIGHRES_IMU's accelerometer noise, 1 σ per axis
+    imu_bias_mps2: tuple[float, float, float] = IMU_BIAS_MPS2  # … and its constant bias, body x, y, z
     seed: int = 0
     crash_speed_mps: float = 2.5
     crash_tilt_deg: float = 60.0

@@ -123,9 +123,9 @@ def test_sih_quadx_on_px4_leans_into_3_mps_as_sih_does():
     assert lean == pytest.approx(SIH_LEAN_DEG, abs=0.7)
     assert fy == pytest.approx(SIH_FY_MPS2, abs=0.1)  # leaning west, the air pushes along body +y
     assert abs(r[:, 2].mean()) < 0.02
-    # the HIGHRES_IMU it sends carries that specific force, with SIH's noise
+    # the HIGHRES_IMU it sends carries that specific force, with SIH's noise and the IMU's bias
     imu = np.array([[m.xacc, m.yacc, m.zacc] for m in (v.telemetry.highres_imu() for _ in range(2000))])
-    assert imu[:, 1].mean() == pytest.approx(v.body.state.fy_mps2, abs=0.01)
+    assert imu[:, 1].mean() == pytest.approx(v.body.state.fy_mps2 + v.cfg.imu_bias_mps2[1], abs=0.01)
     assert imu[:, 1].std() == pytest.approx(0.07, abs=0.01)
 
 
@@ -137,10 +137,12 @@ def test_arducopter_sitl_on_ardupilot_leans_as_sitl_does_in_its_wind():
     assert lean == pytest.approx(SITL_LEAN_DEG, abs=0.2)
     assert fy == pytest.approx(SITL_FY_MPS2, abs=0.02)
     imu = v.telemetry.highres_imu()
-    assert imu.yacc == pytest.approx(fy, abs=0.01)  # SITL's accelerometer is clean
+    # SITL's accelerometer is clean; the fake's carries a real IMU's bias (sitl_fakes.vehicle.IMU_BIAS_MPS2)
+    assert imu.yacc == pytest.approx(fy + v.cfg.imu_bias_mps2[1], abs=0.01)
     # RAW_IMU in milli-g carries it too (ArduPilot's units)
     raw = v.telemetry.raw_imu()
-    assert raw.yacc == pytest.approx(fy / G_MPS2 * 1000, abs=2) and raw.zacc == pytest.approx(-1000, abs=5)
+    bias_mg = v.cfg.imu_bias_mps2[1] / G_MPS2 * 1000
+    assert raw.yacc == pytest.approx(fy / G_MPS2 * 1000 + bias_mg, abs=2) and raw.zacc == pytest.approx(-1000, abs=5)
 
 
 def test_in_a_steady_hover_thrust_and_drag_balance_the_weight():

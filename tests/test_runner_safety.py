@@ -332,3 +332,12 @@ def test_the_floor_acts_at_its_height_above_the_ground(tmp_path):
     assert f.summary["abort_verdict"] == gd.FLOOR and f.outcome.abort_reason.endswith("below floor 1.6 m")
     assert at_abort[0] == pytest.approx(1.6, abs=0.1)
     assert f.ap.p_ned[2] == 0.0 and not f.ap.armed
+
+
+def test_the_climb_turns_the_heading_no_faster_than_its_rate():
+    from flighttest.flying.runner import LOOK_AROUND_DEG, LOOK_AROUND_RATE_DPS, look_around_deg
+
+    assert look_around_deg(5.0) == LOOK_AROUND_DEG  # the mission's 2 m → 7 m climb: a half turn
+    short = look_around_deg(1.0)
+    assert short * math.pi / 1.0 == pytest.approx(LOOK_AROUND_RATE_DPS)  # the raised cosine's peak rate
+    assert look_around_deg(0.0) == 0.0

@@ -75,3 +75,41 @@ def test_nothing_known_before_the_first_sample():
     assert f.sd_mps == 5.0 and f.wind_ned_mps == (0.0, 0.0, 0.0)
     f.update(0.0, (math.nan, 0, 0), (1, 0, 0, 0), (0, 0))  # a non-finite sample is skipped
     assert f.samples == 0
+
+
+def hover_with_bias(turn_deg: float, wind=(0.0, 0.0), bias=(0.05, -0.05), seconds=8.0, seed=1) -> WindFilter:
+    """The runner's climb (5 s at 1 m/s, the heading swung out by ``turn_deg`` and back), then a hover; the
+    x500-like drag (slope 0.26 /s), the IMU with a body-fixed bias."""
+    drag, m = DragModel.isotropic_linear(0.52, 0.1), 2.0
+    rng = np.random.default_rng(seed)
+    f = WindFilter(drag, m)
+    for k in range(int(seconds / 0.02)):
+        t = k * 0.02
+        yaw = math.radians(turn_deg) * 0.5 * (1.0 - math.cos(2.0 * math.pi * min(t / 5.0, 1.0)))
+        q = quat_from_euler(0.0, 0.0, yaw)
+        v = (0.0, 0.0, -1.0 if t < 5.0 else 0.0)
+        bx, by, _ = ned_to_body(v[0] - wind[0], v[1] - wind[1], v[2], *q)
+        fx, fy = drag.force_n(bx, by)
+        f.update(t, v, tuple(q), (fx / m + bias[0] + 0.07 * rng.normal(), fy / m + bias[1] + 0.07 * rng.normal()))
+    return f
+
+
+@pytest.mark.parametrize(("wind", "sd_ratio"), [((0.0, 0.0), 0.5), ((1.5, -1.0), 0.75)])
+def test_a_turn_of_the_heading_tells_the_accelerometers_bias_from_the_wind(wind, sd_ratio):
+    # without the turn a bias of 0.07 m/s² reads as 0.27 m/s of wind, inside the σ the bias's prior gives;
+    # a half turn learns it and the σ shrinks (in wind the drag's scale, unlearned in a hover, keeps a share)
+    still = hover_with_bias(0.0, wind)
+    turned = hover_with_bias(180.0, wind)
+    err_still = math.hypot(still.wn_mps - wind[0], still.we_mps - wind[1])
+    err_turned = math.hypot(turned.wn_mps - wind[0], turned.we_mps - wind[1])
+    assert err_still > 0.15 and err_still < 2.45 * still.sd_mps
+    assert err_turned < 0.1 and err_turned < 2.45 * turned.sd_mps
+    assert turned.sd_mps < sd_ratio * still.sd_mps
+    assert math.hypot(turned.bx_mps2 - 0.05, turned.by_mps2 + 0.05) < 0.02
+
+
+def test_the_log_filter_holds_the_bias_and_covers_it_in_its_model_term():
+    f = WindFilter(SIH[0], 1.0, bias_states=False)
+    assert f.p[3][3] == f.p[4][4] == 0.0
+    f.update(0.0, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.05, 0.0))
+    assert f.bx_mps2 == 0.0 and f.model_sd_mps == pytest.approx(0.05, rel=1e-6)  # 0.05 m/s² over a slope of 1 /s

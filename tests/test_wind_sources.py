@@ -264,8 +264,13 @@ def test_the_smoothed_estimate_states_the_filters_own_uncertainty():
     q = tuple(quat_from_euler(0.1, -0.05, 0.7))
     f.update(0.0, (1.0, -2.0, 0.3), q, (0.2, -0.4))
     v, qq, w = np.array([[1.0, -2.0, 0.3]]), np.array([q]), np.array([[f.wn_mps, f.we_mps, 0.0]])
-    got = wind_mod._model_sd(drag, 3.0, v, qq, w, f.accel_bias_mps2)[0]
+    got = wind_mod._model_sd(drag, 3.0, v, qq, w, 0.0)[0]  # the live filter's bias is a state
     assert got == pytest.approx(f.model_sd_mps, rel=1e-9)
+    held = WindFilter(drag, 3.0, bias_states=False)  # the log's: the bias held, in the model term
+    held.update(0.0, (1.0, -2.0, 0.3), q, (0.2, -0.4))
+    w = np.array([[held.wn_mps, held.we_mps, 0.0]])
+    got = wind_mod._model_sd(drag, 3.0, v, qq, w, held.accel_bias_mps2)[0]
+    assert got == pytest.approx(held.model_sd_mps, rel=1e-9)
 
 
 def _level_samples(f: WindFilter, t0: float, t1: float, v_ned, wind, rate_hz: float = 50.0) -> None:

@@ -212,6 +212,12 @@ def _model_sd(drag: DragModel, mass_kg: float, v: np.ndarray, q: np.ndarray, win
     return model_sd(drag, np.hypot(air[:, 0], air[:, 1]), bias_mps2, np.minimum(sx, sy) / mass_kg)
 
 
+def _filter(drag: DragModel, mass_kg: float) -> WindFilter:
+    """The log's filter: the accelerometer's bias held (variance 0) and in ``model_sd``, so that the smoother
+    below fuses the three states (wn, we, ε) of its two passes."""
+    return WindFilter(drag, mass_kg, bias_states=False)
+
+
 def _steps(state: pd.DataFrame, use: np.ndarray, rate_hz: float) -> pd.DataFrame:
     """The airborne samples averaged over steps of 1/rate_hz: time, velocity, attitude, specific force."""
     cols = ["t_s", "vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "ax_mps2", "ay_mps2", "az_mps2"]
@@ -240,11 +246,11 @@ def _run(f: WindFilter, steps: pd.DataFrame, order: np.ndarray, sign: float, bef
             grow = walk * max(t[k] - f.t_s, 0.0) if f.t_s is not None else 0.0
             p = f.p
             out[k] = (f.wn_mps, f.we_mps, f.scale_error, p[0][0] + grow, p[0][1], p[0][2], p[1][0],
-                      p[1][1] + grow, p[1][2], *p[2])  # fmt: skip
+                      p[1][1] + grow, p[1][2], *p[2][:3])  # fmt: skip
             f.update(t[k], v[k], q[k], a[k])
         else:
             f.update(t[k], v[k], q[k], a[k])
-            out[k] = (f.wn_mps, f.we_mps, f.scale_error, *f.p[0], *f.p[1], *f.p[2])
+            out[k] = (f.wn_mps, f.we_mps, f.scale_error, *f.p[0][:3], *f.p[1][:3], *f.p[2][:3])
     return np.asarray(out, float)
 
 
@@ -287,11 +293,11 @@ def estimate(state: pd.DataFrame, drag: DragModel, mass_kg: float, airborne: np.
     if steps is None or len(steps) < MIN_AIRBORNE_S * rate_hz:
         return None
     n = len(steps)
-    fw = _run(WindFilter(drag, mass_kg), steps, np.arange(n), 1.0, before=False)
-    bw = _run(WindFilter(drag, mass_kg), steps, np.arange(n)[::-1], -1.0, before=True)
+    fw = _run(_filter(drag, mass_kg), steps, np.arange(n), 1.0, before=False)
+    bw = _run(_filter(drag, mass_kg), steps, np.arange(n)[::-1], -1.0, before=True)
     # the common prior both passes start from is the scale's (the wind's own wanders off within seconds); a
     # scale held at 0 (variance 0) is the same in both and fused as known
-    scale_var = WindFilter(drag, mass_kg).p[2][2]
+    scale_var = _filter(drag, mass_kg).p[2][2]
     if scale_var > 0:
         mean, filt_sd = _fuse(fw, bw, np.diag([0.0, 0.0, 1.0 / scale_var]))
     else:
@@ -299,7 +305,7 @@ def estimate(state: pd.DataFrame, drag: DragModel, mass_kg: float, airborne: np.
     v = steps[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(float)
     q = steps[["qw", "qx", "qy", "qz"]].to_numpy(float)
     wind3 = np.column_stack([mean, np.zeros(n)])
-    sd = np.hypot(filt_sd, _model_sd(drag, mass_kg, v, q, wind3, WindFilter(drag, mass_kg).accel_bias_mps2))
+    sd = np.hypot(filt_sd, _model_sd(drag, mass_kg, v, q, wind3, _filter(drag, mass_kg).accel_bias_mps2))
     t_steps = steps["t_s"].to_numpy(float)
     t = state["t_s"].to_numpy(float)
     ned = np.column_stack([np.interp(t, t_steps, wind3[:, i]) for i in range(3)])

@@ -61,6 +61,10 @@ from flighttest.model.trajectory import Trajectory
 # re-exported: what callers of the runner have always imported from here
 __all__ = ["LADDER_TIMEOUT_S", "LINK_GIVE_UP_S", "FlightOutcome", "FlyRequest", "MissionRunner", "final_mode", "fly"]
 CLIMB_RATE_MPS = 1.0
+# the climb's heading swing (flighttest.model.wind_estimate: the accelerometer's bias as a state): a quarter
+# turn separates a body-fixed bias from the wind, a half turn best; at most this yaw rate (PX4: MC_YAWRATE_MAX 200°/s)
+LOOK_AROUND_DEG = 180.0
+LOOK_AROUND_RATE_DPS = 120.0
 HANDOVER_ALT_M = 2.0  # the autopilot's takeoff hands over to flighttest's offboard climb from this height
 HEARTBEAT_WAIT_S = 2.5  # two and a half heartbeat periods: one lost heartbeat is not a lost link
 HEALTH_PROGRESS_S = 10.0  # while waiting for the vehicle's health, a progress line this often
@@ -653,11 +657,16 @@ class MissionRunner:
         d0 = st.d_m
         n_climb = max(int(abs(start[2] - d0) / CLIMB_RATE_MPS * fl.rate_hz), 1)
 
+        look_deg = look_around_deg(n_climb / fl.rate_hz)
+
         def climb_at(k: int) -> Setpoint | None:
             if k > n_climb:
                 return None
             f = k / n_climb
-            return Setpoint(start[0], start[1], d0 + f * (start[2] - d0), yaw_deg=yaw0)
+            # the heading swings out and back: the accelerometer's bias turns with the body, the wind does
+            # not, so the wind filter tells them apart before the start hover judges the air
+            yaw = yaw0 + look_deg * 0.5 * (1.0 - math.cos(2.0 * math.pi * f))
+            return Setpoint(start[0], start[1], d0 + f * (start[2] - d0), yaw_deg=yaw)
 
         await self.streamer.stream(climb_at, Phase.CLIMB, lambda: self.ladder.active)
         if self.ladder.active:  # the ladder owns the vehicle now: this flow must not send anything
@@ -809,6 +818,13 @@ class MissionRunner:
                     and (also is None or also()))
 
         await self.streamer.stream(lambda k: sp, self.phase, done)
+
+
+def look_around_deg(climb_s: float) -> float:
+    """How far the climb turns the heading (out and back, a raised cosine): ``LOOK_AROUND_DEG``, less where the
+    climb is too short to turn that far at ``LOOK_AROUND_RATE_DPS``."""
+    return min(LOOK_AROUND_DEG, LOOK_AROUND_RATE_DPS * max(climb_s, 0.0) / math.pi)
+
 
 def _tracking_margin_mps(traj: Trajectory, region_margin_mps: float) -> float:
     """How far inside the guard's bound the plan was made to stay (its problem's margin over the region's own;

@@ -3,7 +3,7 @@ attitude and velocity, with the airframe's drag model (``flighttest.model.drag``
 and ArduPilot's drag fusion: across the thrust axis the IMU feels only the air's drag, and the drag
 says the air-relative velocity, so ``wind = v_ned − R·v_air``.
 
-A three-state extended Kalman filter ``(wn, we, ε)``: the horizontal wind (the vertical wind is taken as
+An extended Kalman filter ``(wn, we, ε, bx, by)``: the horizontal wind (the vertical wind is taken as
 zero), which wanders as a random walk (``process_sd``), and the drag's scale error ε — the vehicle drags
 (1 + ε) times its model, ε known to ``drag.rel_sd`` beforehand and constant. (Only a drag known to
 ``SCALE_STATE_MAX_REL_SD``: beyond it the product ε·wind the linearisation drops is as large as what it keeps;
@@ -17,9 +17,13 @@ the hover's estimate away. Its measurement noise adapts to the innovations it se
 airframe by an order of magnitude), never below ``accel_sd_mps2``. The same class runs live
 (``flighttest.flying.wind``) and over a log (``flighttest.analysis.wind``): one definition.
 
-``sd_mps`` is honest about what the filter cannot see: its own covariance (the scale error's share
-included), plus what an accelerometer bias of ``accel_bias_mps2`` does to the airspeed it infers. A vehicle
-whose drag is small (ArduCopter SITL's quad leans 1.2° in 3 m/s: ../shared/wind_sitl) senses the wind
+The accelerometer's bias along body x, y is two more states (prior ``accel_bias_mps2``): at one heading it
+reads as wind, and a turn of the heading tells them apart (the runner's climb turns it: bench/RESULTS.md, "The
+climb looks around").
+
+``sd_mps`` is honest about what the filter cannot see: its own covariance (the scale error's and the bias's
+shares included; with ``bias_states`` off, what a bias of ``accel_bias_mps2`` does to the airspeed it infers).
+A vehicle whose drag is small (ArduCopter SITL's quad leans 1.2° in 3 m/s: ../shared/wind_sitl) senses the wind
 poorly, and says so.
 """
 
@@ -53,6 +57,7 @@ SCALE_STATE_MAX_REL_SD = 0.2
 SCALE_LEARN_AFTER_S = 3.0
 SCALE_LEARN_EXCITATION_MPS = 1.0
 V_MEAN_TAU_S = 5.0  # the recent mean's memory
+N_STATES = 5  # wn, we, ε, bx, by
 ITERATIONS_FIRST = 4  # the first sample's relinearisations (Gauss-Newton: 4 meet a 3 m/s wind from calm)
 
 
@@ -64,7 +69,10 @@ def model_sd(drag: DragModel, airspeed_mps, accel_bias_mps2, slope_per_s):
     """What no filter state covers (m/s): an accelerometer bias over the drag's slope per unit mass, and
     for a drag whose scale is not a state, its relative error on the airspeed; numpy-vectorised."""
     slope = np.asarray(slope_per_s, float)
-    out = np.where(slope > 0, accel_bias_mps2 / np.where(slope > 0, slope, 1.0), np.inf)
+    if accel_bias_mps2 > 0:
+        out = np.where(slope > 0, accel_bias_mps2 / np.where(slope > 0, slope, 1.0), np.inf)
+    else:  # the bias is the filter's state
+        out = np.zeros_like(slope)
     if not scale_in_state(drag):
         out = np.hypot(out, drag.rel_sd * np.asarray(airspeed_mps, float))
     return float(out) if out.ndim == 0 else out
@@ -87,8 +95,14 @@ class WindFilter:
     initial_sd_mps: float = INITIAL_SD_MPS
     accel_sd_mps2: float = ACCEL_SD_MPS2
     accel_bias_mps2: float = ACCEL_BIAS_MPS2
+    # the accelerometer's bias along body x, y as states (its prior ``accel_bias_mps2``): learned where the heading
+    # turns under the wind (the runner's climb), else carried in the wind's uncertainty as before; off, the
+    # bias is held at 0 and ``model_sd`` covers it
+    bias_states: bool = True
     process_sd_mps: float = PROCESS_SD_MPS
-    p: list[list[float]] = field(default_factory=list)  # covariance of (wn, we, ε), 3×3
+    p: list[list[float]] = field(default_factory=list)  # covariance of (wn, we, ε, bx, by), 5×5
+    bx_mps2: float = 0.0
+    by_mps2: float = 0.0
     noise_var: float = NOISE_INITIAL_MPS2**2  # the measurement variance the innovations show
     t_s: float | None = None
     t_first_s: float | None = None  # the first sample's time
@@ -102,12 +116,14 @@ class WindFilter:
             self.seed(self.wn_mps, self.we_mps, self.initial_sd_mps)
 
     def seed(self, wn_mps: float, we_mps: float, sd_mps: float) -> None:
-        """Start from a wind known to ``sd_mps`` (an operator's measurement), the drag's scale to its rel_sd."""
+        """Start from a wind known to ``sd_mps`` (an operator's measurement), the drag's scale to its rel_sd,
+        the accelerometer's bias to its prior."""
         self.wn_mps, self.we_mps = wn_mps, we_mps
         # a drag known exactly still gets a state; one whose scale is not a state holds ε at 0
         e = max(self.drag.rel_sd, 1e-3) ** 2 if scale_in_state(self.drag) else 0.0
-        v = sd_mps**2
-        self.p = [[v, 0.0, 0.0], [0.0, v, 0.0], [0.0, 0.0, e]]
+        b = self.accel_bias_mps2**2 if self.bias_states else 0.0
+        diag = (sd_mps**2, sd_mps**2, e, b, b)
+        self.p = [[diag[i] if i == j else 0.0 for j in range(N_STATES)] for i in range(N_STATES)]
 
     # -- the filter ------------------------------------------------------------------------------------
     def predict(self, t_s: float) -> None:
@@ -131,7 +147,8 @@ class WindFilter:
         if self.t_first_s is None:
             self.t_first_s = t_s
         m = self.mass_kg
-        x0 = (self.wn_mps, self.we_mps, self.scale_error)
+        n = N_STATES
+        x0 = (self.wn_mps, self.we_mps, self.scale_error, self.bx_mps2, self.by_mps2)
         p = self.p
         # ∂(body x, y)/∂(wn, we) = −Rᵀ's first two columns' x, y rows: the NED axes' body components
         ax, ay, _ = ned_to_body(1.0, 0.0, 0.0, *q_wxyz)
@@ -150,16 +167,18 @@ class WindFilter:
             bx, by, _ = ned_to_body(v_ned[0] - x[0], v_ned[1] - x[1], v_ned[2], *q_wxyz)
             fx, fy = self.drag.force_n(bx, by, thrust_ratio)
             sx, sy = self.drag.slope_n_per_mps(bx, by, thrust_ratio)
-            # h = (1 + ε)·F(v_b)/m; ∂h/∂w = (1 + ε)·slope/m · (the NED axes' body components); ∂h/∂ε = F/m
-            h = ((k * sx / m * ax, k * sx / m * cx, fx / m), (k * sy / m * ay, k * sy / m * cy, fy / m))
-            dx = (x0[0] - x[0], x0[1] - x[1], x0[2] - x[2])
-            innov = (f_body_xy[0] - k * fx / m - sum(h[0][j] * dx[j] for j in range(3)),
-                     f_body_xy[1] - k * fy / m - sum(h[1][j] * dx[j] for j in range(3)))  # fmt: skip
-            # P Hᵀ (3×2) and S = H P Hᵀ + R (2×2)
-            pht = [[sum(p[i][j] * h[r][j] for j in range(3)) for r in range(2)] for i in range(3)]
-            s00 = sum(h[0][i] * pht[i][0] for i in range(3))
-            s01 = sum(h[0][i] * pht[i][1] for i in range(3))
-            s11 = sum(h[1][i] * pht[i][1] for i in range(3))
+            # h = (1 + ε)·F(v_b)/m + b; ∂h/∂w = (1 + ε)·slope/m · (the NED axes' body components); ∂h/∂ε = F/m;
+            # ∂h/∂b = I
+            h = ((k * sx / m * ax, k * sx / m * cx, fx / m, 1.0, 0.0),
+                 (k * sy / m * ay, k * sy / m * cy, fy / m, 0.0, 1.0))
+            dx = tuple(x0[i] - x[i] for i in range(n))
+            innov = (f_body_xy[0] - k * fx / m - x[3] - sum(h[0][j] * dx[j] for j in range(n)),
+                     f_body_xy[1] - k * fy / m - x[4] - sum(h[1][j] * dx[j] for j in range(n)))  # fmt: skip
+            # P Hᵀ (n×2) and S = H P Hᵀ + R (2×2)
+            pht = [[sum(p[i][j] * h[r][j] for j in range(n)) for r in range(2)] for i in range(n)]
+            s00 = sum(h[0][i] * pht[i][0] for i in range(n))
+            s01 = sum(h[0][i] * pht[i][1] for i in range(n))
+            s11 = sum(h[1][i] * pht[i][1] for i in range(n))
             if x is x0:
                 seen = 0.5 * (innov[0] ** 2 + innov[1] ** 2) - 0.5 * (s00 + s11)
                 a = min(dt_s / NOISE_TAU_S, 1.0)
@@ -171,17 +190,18 @@ class WindFilter:
             if det <= 0 or not math.isfinite(det):
                 return
             i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-            # K = P Hᵀ S⁻¹ (3×2); ε's row zero while it is only considered
+            # K = P Hᵀ S⁻¹ (n×2); ε's row zero while it is only considered
             kg = [(row[0] * i00 + row[1] * i01, row[0] * i01 + row[1] * i11) for row in pht]
             if not learn:
                 kg[2] = (0.0, 0.0)
-            x = tuple(x0[i] + kg[i][0] * innov[0] + kg[i][1] * innov[1] for i in range(3))
+            x = tuple(x0[i] + kg[i][0] * innov[0] + kg[i][1] * innov[1] for i in range(n))
         self.wn_mps, self.we_mps, self.scale_error = x[0], x[1], max(x[2], SCALE_MIN)
+        self.bx_mps2, self.by_mps2 = x[3], x[4]
         # P ← P − K (P Hᵀ)ᵀ − (P Hᵀ) Kᵀ + K S Kᵀ: right for any gain (the optimal one reduces it to P − K H P)
         ks = [(g[0] * s00 + g[1] * s01, g[0] * s01 + g[1] * s11) for g in kg]
         new = [[p[i][j] - (kg[i][0] * pht[j][0] + kg[i][1] * pht[j][1]) - (pht[i][0] * kg[j][0] + pht[i][1] * kg[j][1])
-                + (ks[i][0] * kg[j][0] + ks[i][1] * kg[j][1]) for j in range(3)] for i in range(3)]  # fmt: skip
-        for i in range(3):
+                + (ks[i][0] * kg[j][0] + ks[i][1] * kg[j][1]) for j in range(n)] for i in range(n)]  # fmt: skip
+        for i in range(n):
             new[i][i] = max(new[i][i], 0.0)
             for j in range(i):
                 new[i][j] = new[j][i] = 0.5 * (new[i][j] + new[j][i])
@@ -204,7 +224,8 @@ class WindFilter:
     def model_sd_mps(self) -> float:
         """What the filter's states do not cover: an accelerometer bias seen through the drag's slope (and an
         assumed drag's error on the airspeed)."""
-        return model_sd(self.drag, self.airspeed_mps, self.accel_bias_mps2, self.slope_per_s)
+        bias = 0.0 if self.bias_states else self.accel_bias_mps2
+        return model_sd(self.drag, self.airspeed_mps, bias, self.slope_per_s)
 
     @property
     def sd_mps(self) -> float:

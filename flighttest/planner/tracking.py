@@ -33,7 +33,7 @@ class TrackingMargin:
 
     guard_margin_mps: float = 0.4  # plan this far inside the guard's bound (on top of its own margin)
     tilt_margin_deg: float = 10.0  # plan tilt ≤ vehicle max tilt − this
-    rate_fraction: float = 0.35  # plan body rates ≤ this × the vehicle's max rates (PX4 trails faster turns)
+    rate_fraction: float = 0.3  # plan body rates ≤ this × the vehicle's max rates (PX4 trails faster turns)
     thrust_max_fraction: float = 0.75  # collective ≤ this × the rotors' maximum
     thrust_min_fraction: float = 0.2  # collective ≥ this × the rotors' maximum (never idle)
     descent_max_mps: float = 1.3  # v_D ≤ this: below PX4's MPC_Z_VEL_MAX_DN (1.5 m/s by default)
