@@ -95,6 +95,7 @@ def test_a_pilot_switching_to_a_manual_mode_mid_descent_is_a_takeover(fake_vehic
 NO_VRS_ONSET_MPS = 1.6
 
 
+@pytest.mark.timeout(600)  # the EKF's 42 s, a 2-minute probe, two flights and the plans: about 6 minutes
 def test_campaign_on_the_arducopter_fake_runs_all_six_steps_as_on_its_sitl(tmp_path):
     # default ArduCopter parameters: the plans fit its GUIDED limits (the profile's [autopilot]), the
     # preflight passes, the guard stays silent and the helix is faster; the fake's EKF takes its real 42 s

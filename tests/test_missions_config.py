@@ -97,7 +97,9 @@ def test_tracking_margin_from_a_plan_table_and_its_problem():
     assert (m.tilt_margin_deg, m.rate_fraction, m.descent_max_mps) == (15.0, 0.5, 1.3)
     p = helix_problem_for_flight(prof, 5.0, 3.0, m)
     assert p.tilt_max_rad == pytest.approx(0.5235987756)  # 45° − 15°
-    assert p.rate_max_rps[0] == pytest.approx(1.9198621772)  # 0.5 × 220 °/s
+    assert p.rate_max_rps[0] == pytest.approx(0.9599310886)  # the x500's own 0.25 (below the plan's 0.5) × 220 °/s
+    sih = helix_problem_for_flight(load_profile("sih_quadx"), 5.0, 3.0, m)
+    assert sih.rate_max_rps[0] == pytest.approx(1.9198621772)  # a vehicle that says nothing: the plan's 0.5
     n_thrust = 4 * prof.max_thrust_per_rotor_n / prof.mass_kg
     assert p.f_min_mps2 == pytest.approx(0.2 * n_thrust) and p.f_max_mps2 == pytest.approx(0.75 * n_thrust)
     assert p.descent_max_mps == 1.3

@@ -335,9 +335,11 @@ def test_the_floor_acts_at_its_height_above_the_ground(tmp_path):
 
 
 def test_the_climb_turns_the_heading_no_faster_than_its_rate():
-    from flighttest.flying.runner import LOOK_AROUND_DEG, LOOK_AROUND_RATE_DPS, look_around_deg
+    from flighttest.flying.runner import LOOK_AROUND_DEG, LOOK_AROUND_RATE_DPS, LOOK_AROUND_SHARE, look_around_deg
 
-    assert look_around_deg(5.0) == LOOK_AROUND_DEG  # the mission's 2 m → 7 m climb: a half turn
+    assert look_around_deg(10.0) == LOOK_AROUND_DEG
+    # the mission's 2 m → 7 m climb at 1 m/s, its swing in the first LOOK_AROUND_SHARE of it: over 130°
+    assert 130.0 < look_around_deg(LOOK_AROUND_SHARE * 5.0) <= LOOK_AROUND_DEG
     short = look_around_deg(1.0)
     assert short * math.pi / 1.0 == pytest.approx(LOOK_AROUND_RATE_DPS)  # the raised cosine's peak rate
     assert look_around_deg(0.0) == 0.0

@@ -54,11 +54,17 @@ def feedforward_accel_ned(
     """The acceleration to send at each row (n, 3) for a plan's velocity and net acceleration."""
     t = np.asarray(t_s, float)
     acc = np.asarray(acc_ned, float)
+    v_air = np.asarray(vel_ned, float) - np.asarray(wind_ned, float)
     if ff.lead_s > 0 and t.size > 1:
         led = t + ff.lead_s
         acc = np.stack([np.interp(led, t, acc[:, 0], right=0.0), np.interp(led, t, acc[:, 1], right=0.0),
                         acc[:, 2]], axis=1)  # fmt: skip
-    acc = acc + ff.drag_per_s * (np.asarray(vel_ned, float) - np.asarray(wind_ned, float))
+        # the drag's share of the tilt trails as the rest does: led too (bench/RESULTS.md, "The climb looks
+        # around": sih_quadx's drag-aware helix on the fake)
+        end = v_air[-1]
+        v_air = np.stack([np.interp(led, t, v_air[:, 0], right=end[0]), np.interp(led, t, v_air[:, 1], right=end[1]),
+                          v_air[:, 2]], axis=1)  # fmt: skip
+    acc = acc + ff.drag_per_s * v_air
     if ff.decoupled:
         scale = G_MPS2 / np.maximum(G_MPS2 - acc[:, 2], MIN_SPECIFIC_THRUST_MPS2)
         acc = acc * np.stack([scale, scale, np.ones_like(scale)], axis=1)

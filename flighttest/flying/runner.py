@@ -61,10 +61,12 @@ from flighttest.model.trajectory import Trajectory
 # re-exported: what callers of the runner have always imported from here
 __all__ = ["LADDER_TIMEOUT_S", "LINK_GIVE_UP_S", "FlightOutcome", "FlyRequest", "MissionRunner", "final_mode", "fly"]
 CLIMB_RATE_MPS = 1.0
-# the climb's heading swing (flighttest.model.wind_estimate: the accelerometer's bias as a state): a quarter
-# turn separates a body-fixed bias from the wind, a half turn best; at most this yaw rate (PX4: MC_YAWRATE_MAX 200°/s)
-LOOK_AROUND_DEG = 180.0
-LOOK_AROUND_RATE_DPS = 120.0
+# the climb's heading swing (flighttest.model.wind_estimate: the accelerometer's bias as a state): a quarter turn
+# tells a body-fixed bias from the wind, more tells it better; short of a half turn, which the autopilot may take
+# either way round (bench/RESULTS.md, "The climb looks around")
+LOOK_AROUND_DEG = 150.0
+LOOK_AROUND_RATE_DPS = 120.0  # at the swing's peak: PX4's MC_YAWRATE_MAX is 200°/s
+LOOK_AROUND_SHARE = 0.7  # of the climb: the fake's yaw trailed the swing by 1-2 s (bench/RESULTS.md, as above)
 HANDOVER_ALT_M = 2.0  # the autopilot's takeoff hands over to flighttest's offboard climb from this height
 HEARTBEAT_WAIT_S = 2.5  # two and a half heartbeat periods: one lost heartbeat is not a lost link
 HEALTH_PROGRESS_S = 10.0  # while waiting for the vehicle's health, a progress line this often
@@ -657,7 +659,9 @@ class MissionRunner:
         d0 = st.d_m
         n_climb = max(int(abs(start[2] - d0) / CLIMB_RATE_MPS * fl.rate_hz), 1)
 
-        look_deg = look_around_deg(n_climb / fl.rate_hz)
+        # the swing ends before the climb does: the heading has settled when the hover's baseline begins
+        n_look = max(int(LOOK_AROUND_SHARE * n_climb), 1)
+        look_deg = look_around_deg(n_look / fl.rate_hz)
 
         def climb_at(k: int) -> Setpoint | None:
             if k > n_climb:
@@ -665,7 +669,7 @@ class MissionRunner:
             f = k / n_climb
             # the heading swings out and back: the accelerometer's bias turns with the body, the wind does
             # not, so the wind filter tells them apart before the start hover judges the air
-            yaw = yaw0 + look_deg * 0.5 * (1.0 - math.cos(2.0 * math.pi * f))
+            yaw = yaw0 + look_deg * 0.5 * (1.0 - math.cos(2.0 * math.pi * min(k / n_look, 1.0)))
             return Setpoint(start[0], start[1], d0 + f * (start[2] - d0), yaw_deg=yaw)
 
         await self.streamer.stream(climb_at, Phase.CLIMB, lambda: self.ladder.active)

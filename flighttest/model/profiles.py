@@ -112,6 +112,9 @@ class VehicleProfile:
     # how far inside the guard's bound a helix must be planned for this vehicle's tracking, at least (the
     # mission's guard_margin_mps is the other floor: plans keep the larger; flighttest.planner.tracking)
     tracking_margin_mps: float = 0.0
+    # … and how fast its body may turn in a plan, at most, as a fraction of max_rate_dps (the mission's
+    # rate_fraction is the other bound: plans keep the lower)
+    tracking_rate_fraction: float = 1.0
     vrs: VrsBoundary = field(default_factory=VrsBoundary)
     # the autopilot's setpoint-shaping limits the plans must fit within (None: no table, none apply)
     autopilot: AutopilotLimits | None = None
@@ -206,6 +209,7 @@ class VehicleProfile:
             "cone_deg": self.vrs.cone_deg,
             "margin_mps": self.vrs.margin_mps,
             "tracking_margin_mps": self.tracking_margin_mps,
+            "tracking_rate_fraction": self.tracking_rate_fraction,
             "autopilot": self.autopilot.summary() if self.autopilot is not None else None,
             "drag": self.drag.to_table() if self.drag is not None else None,
         }
@@ -240,6 +244,7 @@ _TOP_OPTIONAL: dict[str, Any] = {
     "yaw_moment_per_thrust_m": Range(0.0, 1.0, "m", lo_open=True),
     "drag_n_per_mps": Range(0.0, 1000.0, "N·s/m"),
     "tracking_margin_mps": Range(0.0, 5.0, "m/s"),
+    "tracking_rate_fraction": Range(0.0, 1.0, "", lo_open=True),
 }
 _VRS_FIELDS: dict[str, Any] = {
     "cone_deg": Range(0.0, 90.0, "°", lo_open=True, hi_open=True),

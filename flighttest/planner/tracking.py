@@ -33,7 +33,7 @@ class TrackingMargin:
 
     guard_margin_mps: float = 0.4  # plan this far inside the guard's bound (on top of its own margin)
     tilt_margin_deg: float = 10.0  # plan tilt ≤ vehicle max tilt − this
-    rate_fraction: float = 0.3  # plan body rates ≤ this × the vehicle's max rates (PX4 trails faster turns)
+    rate_fraction: float = 0.35  # plan body rates ≤ this × the vehicle's max rates (PX4 trails faster turns)
     thrust_max_fraction: float = 0.75  # collective ≤ this × the rotors' maximum
     thrust_min_fraction: float = 0.2  # collective ≥ this × the rotors' maximum (never idle)
     descent_max_mps: float = 1.3  # v_D ≤ this: below PX4's MPC_Z_VEL_MAX_DN (1.5 m/s by default)
@@ -108,7 +108,7 @@ def helix_problem_for_flight(
         w_allow_mps=profile.w_allow_mps,
         margin_mps=profile.vrs.margin_mps + guard_margin_for(profile, margin),
     )
-    rates_dps = min(profile.max_rate_dps[:2]) * margin.rate_fraction
+    rates_dps = min(profile.max_rate_dps[:2]) * min(margin.rate_fraction, profile.tracking_rate_fraction)
     p = problem_for_vehicle(
         profile,
         height_m=height_m,

@@ -43,7 +43,9 @@ def wind_speeds(max_wind_mps: float, step_mps: float) -> list[float]:
 
 
 def _key(profile: VehicleProfile, plan: dict[str, Any], speed_mps: float, radius_mps: float) -> str:
-    what = {"profile": profile.summary(), "plan": plan, "speed_mps": speed_mps, "radius_mps": radius_mps,
+    # the profile's content, not where it lies: a campaign's copy of a vehicle plans as the original
+    summary = {k: v for k, v in profile.summary().items() if k != "path"}
+    what = {"profile": summary, "plan": plan, "speed_mps": speed_mps, "radius_mps": radius_mps,
             "flighttest": __version__}  # fmt: skip
     return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
