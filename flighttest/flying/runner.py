@@ -659,9 +659,11 @@ class MissionRunner:
         d0 = st.d_m
         n_climb = max(int(abs(start[2] - d0) / CLIMB_RATE_MPS * fl.rate_hz), 1)
 
-        # the swing ends before the climb does: the heading has settled when the hover's baseline begins
+        # the swing ends before the climb does: the heading has settled when the hover's baseline begins. Only
+        # where the hover chooses among plans for the wind: in a probe it left the yaw ringing into the hover
+        # identify references (its onset's uncertainty 0.07 → 0.35-0.45 m/s: bench/RESULTS.md, as above)
         n_look = max(int(LOOK_AROUND_SHARE * n_climb), 1)
-        look_deg = look_around_deg(n_look / fl.rate_hz)
+        look_deg = look_around_deg(n_look / fl.rate_hz) if self.req.wind_plans else 0.0
 
         def climb_at(k: int) -> Setpoint | None:
             if k > n_climb:
