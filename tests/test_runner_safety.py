@@ -18,11 +18,12 @@ import pytest
 from flighttest.flying import guard as gd
 from flighttest.flying import log_writer
 from flighttest.flying.autopilot import ARDUPILOT
+from flighttest.flying.mission_scripts import load_mission_module
 from flighttest.flying.wind import WindEstimate, WindSources, autopilot_report, fuse
 from flighttest.model.frames import quat_from_euler
 from flighttest.model.trajectory import Trajectory
 from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
-from virtual_flight import DESCENT_M, START_M, X500, fly, in_phase
+from virtual_flight import DESCENT_M, START_M, X500, config, fly, in_phase
 
 AP_READY = {**AP_DEFAULTS, "WP_ACC_Z": 1.5}
 
@@ -343,3 +344,27 @@ def test_the_climb_turns_the_heading_no_faster_than_its_rate():
     short = look_around_deg(1.0)
     assert short * math.pi / 1.0 == pytest.approx(LOOK_AROUND_RATE_DPS)  # the raised cosine's peak rate
     assert look_around_deg(0.0) == 0.0
+
+
+def _climb_yaw_deg(f) -> np.ndarray:
+    rows = [r.split(",") for r in (Path(f.outcome.log_dir) / "setpoints.csv").read_text().splitlines()]
+    yaw, phase = rows[0].index("yaw_deg"), rows[0].index("phase")
+    return np.array([float(r[yaw]) for r in rows[1:] if r[phase] == "climb"])
+
+
+def test_only_a_flight_that_chooses_a_plan_for_the_wind_swings_its_heading_in_the_climb(tmp_path):
+    from flighttest.flying.runner import LOOK_AROUND_DEG, LOOK_AROUND_RATE_DPS
+
+    # the vertical (no plans for the wind, as the probe): the heading held; the same flight given a plan for
+    # the wind to choose from: the climb's swing, out and back to the plan's heading before the hover
+    still = fly(tmp_path / "still")
+    assert still.outcome.outcome == "completed"
+    held = _climb_yaw_deg(still)
+    assert held.size > 50 and np.ptp(held) == 0.0
+    plan = load_mission_module("vertical").plan(X500, config(True))
+    swung = fly(tmp_path / "swung", request={"wind_plans": [plan]})
+    assert swung.outcome.outcome == "completed"
+    yaw = _climb_yaw_deg(swung)
+    # this short climb (to START_M) swings as far as the rate allows, and ends at the heading it left
+    assert 20.0 < np.ptp(yaw) <= LOOK_AROUND_DEG and yaw[-1] == pytest.approx(yaw[0], abs=1e-6)
+    assert np.abs(np.diff(yaw)).max() * 50.0 <= LOOK_AROUND_RATE_DPS * 1.01  # setpoints at 50 Hz
