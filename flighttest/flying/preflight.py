@@ -94,7 +94,12 @@ class TrajectoryStats:
     accel_h_max_mps2: float = 0.0  # largest |(an, ae)|
 
 
-def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: float) -> TrajectoryStats:
+def trajectory_stats(
+    traj: Trajectory, region: GuardRegion, arrest_accel_mps2: float, drag_per_s: float = 0.0,
+    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> TrajectoryStats:  # fmt: skip
+    """``drag_per_s``: the vehicle's linear drag per unit mass; with it the disk is judged as the thrust
+    will tilt it, against the plan's acceleration and the drag of the air (``wind_ned_mps``)."""
     # the loader checked the file; the preflight checks again what will actually be flown (a
     # trajectory built or edited in memory never went through the loader)
     rate = traj.meta.get("resampled_hz")
@@ -111,13 +116,17 @@ def trajectory_stats(traj: Trajectory, region: GuardRegion, arrest_accel_mps2: f
     an, ae, ad = (df[c].to_numpy(float) for c in ("an_mps2", "ae_mps2", "ad_mps2"))
     # stopping a sink vd at arrest_accel costs vd²/2a of height below where it starts
     stop = np.where(vd > 0, vd * vd / (2.0 * arrest_accel_mps2), 0.0)
-    if traj.has_attitude():
+    if traj.has_attitude() and drag_per_s <= 0:
         q = traj.attitude_quat()
         _, _, _, margin = region.check(vn, ve, vd, q[:, 0], q[:, 1], q[:, 2], q[:, 3])
         margin = np.asarray(margin, float)
     else:  # attitude from the commanded acceleration (thrust along −z_body), as the guard predicts
-        wu = [predicted_blade_velocity_mps(a, b, c, x, y, z, horizon_s=0.0)
-              for a, b, c, x, y, z in zip(vn, ve, vd, an, ae, ad)]  # fmt: skip
+        # a plan's own attitude is drag-free: the thrust also takes the drag, which tilts the disk further
+        # (sih_quadx's helix: −0.51 m/s from the file where the planner's drag-aware check keeps it clear)
+        wn, we, wd = (float(x) for x in wind_ned_mps)
+        tn, te, td = (a + drag_per_s * (v - w) for a, v, w in ((an, vn, wn), (ae, ve, we), (ad, vd, wd)))
+        wu = [predicted_blade_velocity_mps(a, b, c, x, y, z, wn, we, wd, horizon_s=0.0)
+              for a, b, c, x, y, z in zip(vn, ve, vd, tn, te, td)]  # fmt: skip
         w, u = np.array(wu).T
         margin = np.asarray(region.margin(w, u), float)
     i = int(np.argmin(margin))

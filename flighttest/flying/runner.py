@@ -586,7 +586,7 @@ class MissionRunner:
         self.ff = self._feedforward(all_params, await link.autopilot_name())
         self.stream_traj = for_autopilot(self.traj, self.ff, self.watch.wind_ned_mps())
         accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
-        stats = trajectory_stats(self.traj, self.limits.region, accel)
+        stats = trajectory_stats(self.traj, self.limits.region, accel, self.ff.drag_per_s, self.watch.wind_ned_mps())
         ab = self.cfg.abort
         checks = vehicle_checks(link.state, self.now(), self.fl.telemetry_hz, self.fl.min_battery_percent)
         checks.append(mode_check(link.state.flight_mode, rules))
