@@ -290,3 +290,34 @@ def test_an_onset_identify_refuses_keeps_the_prior_only_where_its_band_reaches_i
     else:
         assert rc != 0 and rec["status"] == "failed" and "refused" in rec["error"]
         assert s["failed_step"] == "identify"
+
+
+def test_a_probe_in_too_much_wind_that_measured_nothing_keeps_the_prior(env, tmp_path, monkeypatch):
+    # PX4 SITL's campaign in 3 m/s: the probe leaned 17.6° into the wind and never descended through its disk;
+    # identify refuses it for the wind with no onset at all, which says nothing against the prior: go on with it
+    from flighttest.analysis import identify
+
+    why = ("2.83 m/s of air across the disk moves Onera's VRS entry by 0.192 m/s",)
+
+    def refused(log, profile):
+        raise identify.WindyProbe("no onset to find; refused", math.nan, math.nan, why, {})
+
+    monkeypatch.setattr(identify, "identify_onset", refused)
+    root = _campaign(tmp_path / "campaign", "quiet")
+    prior = load_profile("x500").w_allow_mps
+    rc, out, err = env(root, "--only", "identify", "--json")
+    rec = _steps(root)["identify"]
+    assert rc == 0 and rec["status"] == "done", err
+    o = rec["outputs"]
+    assert o["onset_found"] is False and o["w_onset_mps"] is None
+    assert o["message"] == f"the probe measured no onset in its air ({why[0]}): w_allow stays at prior {prior:.3f} m/s"
+    assert json.loads(out)["identify_message"] == o["message"]
+    assert load_profile(root / "vehicles" / "x500.toml").w_allow_mps == pytest.approx(prior)
+
+    # a windy probe that did read an onset below the prior still stops the campaign
+    def below(log, profile):
+        raise identify.WindyProbe("refused", 0.4, 0.05, why, {})
+
+    monkeypatch.setattr(identify, "identify_onset", below)
+    rc, out, err = env(root, "--only", "identify", "--json")
+    assert rc != 0 and _steps(root)["identify"]["status"] == "failed"

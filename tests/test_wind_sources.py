@@ -34,6 +34,7 @@ from flighttest.analysis.identify import (
 from flighttest.analysis.loaders import load_log
 from flighttest.analysis.pipeline import analyse
 from flighttest.cli import main
+from flighttest.errors import FlighttestError
 from flighttest.flying.wind import REPORT_SD_UNKNOWN_MPS, WIND_COVERAGE_SIGMAS
 from flighttest.model.drag import DragModel
 from flighttest.model.frames import quat_from_euler
@@ -325,10 +326,12 @@ def test_compare_and_report_carry_the_wind(tmp_path, capsys):
 STREAM = (8.0, 33.0)
 
 
-def _probe(d: Path, wind, onset=0.7) -> Path:
-    """A flighttest probe folder around a synthetic sweep flown in ``wind`` (reported by the autopilot)."""
+def _probe(d: Path, wind, onset=0.7, amplitude_m=2.0, climb_m=0.0) -> Path:
+    """A flighttest probe folder around a synthetic sweep flown in ``wind`` (reported by the autopilot),
+    after a climb of ``climb_m`` (identify leaves out the samples within 0.5 m of the lowest)."""
     d.mkdir(parents=True)
-    f = SyntheticFlight(duration_s=40.0, descents=[], probe=(STREAM[0], 2.0, 0.02, STREAM[1] - STREAM[0]),
+    climb = [(1.0, -climb_m, 3.0)] if climb_m else []
+    f = SyntheticFlight(duration_s=40.0, descents=climb, probe=(STREAM[0], amplitude_m, 0.02, STREAM[1] - STREAM[0]),
                         onset_mps=onset, wind_ned_mps=wind, wind_report_sd_mps=0.2)  # fmt: skip
     write_tlog(f, d / "flight.tlog", rate_hz=25.0)
     t = np.arange(2.0, 36.0, 0.02)
@@ -349,6 +352,20 @@ def test_identify_says_the_probe_was_flown_in_wind(tmp_path):
     assert s["wind_note"].startswith("flown in 1.00 ± 0.20 m/s of wind (autopilot: WIND_COV): the onset found is for "
                                      "that air")  # fmt: skip
     assert s["in_plane_air_mps"] == pytest.approx(1.0, abs=0.05)
+
+
+def test_a_probe_in_wind_that_never_descended_through_its_disk_is_refused_for_the_wind(tmp_path):
+    # PX4 SITL's probe in 3 m/s: stopped before its air-relative descent reached 0.05 m/s; identify says the
+    # wind, not "too few descending samples", and the refusal carries no onset (the campaign keeps the prior)
+    folder = _probe(tmp_path / "p", (0.0, 3.5, 0.0), amplitude_m=0.005, climb_m=2.0)
+    with pytest.raises(WindyProbe, match=r"no onset to find; refused: .*air across the disk") as caught:
+        identify_onset(load_log(folder), load_profile("x500"), FAST)
+    assert math.isnan(caught.value.w_onset_mps) and not caught.value.agrees_with(0.0)
+    assert caught.value.wind["wind_ned_mps"] == pytest.approx([0.0, 3.5, 0.0], abs=1e-3)
+    calm = _probe(tmp_path / "c", (0.0, 0.0, 0.0), amplitude_m=0.005, climb_m=2.0)
+    with pytest.raises(FlighttestError, match="too few descending samples") as caught:
+        identify_onset(load_log(calm), load_profile("x500"), FAST)
+    assert not isinstance(caught.value, WindyProbe)
 
 
 def test_identify_refuses_a_probe_flown_in_more_wind_than_it_can_correct_for(tmp_path, monkeypatch, capsys):

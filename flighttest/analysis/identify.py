@@ -159,6 +159,12 @@ def untrusted_onset_line(bad: ImplausibleOnset, prior_mps: float) -> str:
             f"({'; '.join(bad.reasons)}): w_allow stays at prior {prior_mps:.3f} m/s, inside that band")  # fmt: skip
 
 
+def windy_probe_line(bad: ImplausibleOnset, prior_mps: float) -> str:
+    """What the campaign says when a probe flown in too much wind measured no onset at all."""
+    return (f"the probe measured no onset in its air ({'; '.join(bad.reasons)}): w_allow stays at prior "
+            f"{prior_mps:.3f} m/s")  # fmt: skip
+
+
 class WindyProbe(ImplausibleOnset):
     """The probe was flown in more wind than identify can correct for (module docstring): the fit's onset
     ``w_onset_mps`` ± ``uncertainty_mps`` is for air it cannot vouch for; ``wind`` describes it."""
@@ -566,6 +572,14 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     t, w_all, y_all, use, dt, n_win = ps.t_s, ps.w_mps, ps.power, ps.use, ps.dt_s, ps.n_win
     descending = use & (w_all > cfg.min_speed_mps)
     if descending.sum() < 3 * cfg.min_samples_above:
+        # a probe held in wind leans into it, and the air meets its disk from below: on PX4 SITL in 3 m/s
+        # (17.6° of lean) a 1.07 m/s descent was 0.21 m/s through the disk, and the sweep never reached one
+        pw = probe_wind(log, profile, ps, math.nan)
+        if why := windy(pw, profile.w_allow_mps):
+            raise WindyProbe(f"{log.name}: probe {pw.note('the sweep')}; its air-relative descent passed "
+                             f"{cfg.min_speed_mps:g} m/s in {int(descending.sum())} samples: no onset to find; "
+                             "refused: " + "; ".join(why) + " (nothing stored)",
+                             math.nan, math.nan, tuple(why), pw.summary("the sweep"))  # fmt: skip
         raise FlighttestError(f"{log.name}: too few descending samples to identify an onset ({int(descending.sum())})")
     w_top = float(w_all[descending].max())
     w_sorted = np.sort(w_all[use])
