@@ -196,7 +196,7 @@ def test_preflight_result_summary():
 def test_the_plan_is_judged_with_the_disk_the_drag_tilts():
     # forward at 3 m/s, sinking 0.8 m/s, level in the file (no acceleration): the thrust also takes the drag,
     # so the disk leans into the motion and the air meets it less from below (sih_quadx's helix warned
-    # −0.51 m/s from its drag-free file attitude where the planner's drag-aware check keeps it clear)
+    # −0.34 m/s from its drag-free file attitude where the planner's drag-aware check keeps it clear)
     t = np.arange(0.0, 2.0, 0.02)
     one, zero = np.ones_like(t), np.zeros_like(t)
     meta = {"kind": "planar", "vehicle": "x500", "problem": {}, "status": "ok", "format": FORMAT}

@@ -122,7 +122,7 @@ def trajectory_stats(
         margin = np.asarray(margin, float)
     else:  # attitude from the commanded acceleration (thrust along −z_body), as the guard predicts
         # a plan's own attitude is drag-free: the thrust also takes the drag, which tilts the disk further
-        # (sih_quadx's helix: −0.51 m/s from the file where the planner's drag-aware check keeps it clear)
+        # (sih_quadx's helix: −0.34 m/s from the file, +0.53 tilted: bench/RESULTS.md, "The preflight judges …")
         wn, we, wd = (float(x) for x in wind_ned_mps)
         tn, te, td = (a + drag_per_s * (v - w) for a, v, w in ((an, vn, wn), (ae, ve, we), (ad, vd, wd)))
         wu = [predicted_blade_velocity_mps(a, b, c, x, y, z, wn, we, wd, horizon_s=0.0)
