@@ -15,12 +15,7 @@ thrust vector when the plan needs it (measured on PX4 SITL and on the fake calib
    pull ahead).
 2. **Drag** (``drag_per_s``): PX4 assumes thrust and gravity are all that act; a vehicle with linear
    drag (SIH: ``SIH_KDV`` N per m/s) needs ``drag/m · v_air`` more. Without it the velocity loop
-   makes up the loss late, at the helix's speeds by tenths of a m/s. The share of the wind alone,
-   ``drag/m · (−wind)``, is already held by the autopilot's velocity integrator after the start hover:
-   only the drag of the plan's own (ground) velocity is sent. Sending the air's whole drag doubled the
-   wind's share: on PX4 SITL in 3 m/s the vehicle lurched 1.4 m upwind at the stream start (roll
-   17.5° → 30.6°) and the probe stopped on its fluctuation detector (bench/RESULTS.md, "Issue 21 on
-   real firmware").
+   makes up the loss late, at the helix's speeds by tenths of a m/s.
 3. **Decoupling** (``decoupled``, PX4's ``MPC_ACC_DECOUPLE`` = 1, its default): PX4 tilts for the
    horizontal acceleration *against gravity alone* and sets the vertical thrust separately, so in a
    plunge (vertical acceleration ``a_d`` > 0) it tilts less than the plan — by ``(g − a_d)/g`` in
@@ -53,28 +48,30 @@ class Feedforward:
         return {"lead_s": self.lead_s, "drag_per_s": self.drag_per_s, "decoupled": self.decoupled}
 
 
-def feedforward_accel_ned(t_s: np.ndarray, vel_ned: np.ndarray, acc_ned: np.ndarray, ff: Feedforward) -> np.ndarray:
+def feedforward_accel_ned(
+    t_s: np.ndarray, vel_ned: np.ndarray, acc_ned: np.ndarray, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)
+) -> np.ndarray:
     """The acceleration to send at each row (n, 3) for a plan's velocity and net acceleration."""
     t = np.asarray(t_s, float)
     acc = np.asarray(acc_ned, float)
-    v = np.asarray(vel_ned, float)  # relative to the start hover, whose drag of the wind the autopilot holds
+    v_air = np.asarray(vel_ned, float) - np.asarray(wind_ned, float)
     if ff.lead_s > 0 and t.size > 1:
         led = t + ff.lead_s
         acc = np.stack([np.interp(led, t, acc[:, 0], right=0.0), np.interp(led, t, acc[:, 1], right=0.0),
                         acc[:, 2]], axis=1)  # fmt: skip
         # the drag's share of the tilt trails as the rest does: led too (bench/RESULTS.md, "The climb looks
         # around": sih_quadx's drag-aware helix on the fake)
-        end = v[-1]
-        v = np.stack([np.interp(led, t, v[:, 0], right=end[0]), np.interp(led, t, v[:, 1], right=end[1]), v[:, 2]],
-                     axis=1)  # fmt: skip
-    acc = acc + ff.drag_per_s * v
+        end = v_air[-1]
+        v_air = np.stack([np.interp(led, t, v_air[:, 0], right=end[0]), np.interp(led, t, v_air[:, 1], right=end[1]),
+                          v_air[:, 2]], axis=1)  # fmt: skip
+    acc = acc + ff.drag_per_s * v_air
     if ff.decoupled:
         scale = G_MPS2 / np.maximum(G_MPS2 - acc[:, 2], MIN_SPECIFIC_THRUST_MPS2)
         acc = acc * np.stack([scale, scale, np.ones_like(scale)], axis=1)
     return acc
 
 
-def for_autopilot(traj: Trajectory, ff: Feedforward) -> Trajectory:
+def for_autopilot(traj: Trajectory, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)) -> Trajectory:
     """``traj`` with its acceleration columns replaced by what the autopilot should be sent."""
     df = traj.df.copy()
     acc = feedforward_accel_ned(
@@ -82,6 +79,7 @@ def for_autopilot(traj: Trajectory, ff: Feedforward) -> Trajectory:
         df[["vn_mps", "ve_mps", "vd_mps"]].to_numpy(float),
         df[["an_mps2", "ae_mps2", "ad_mps2"]].to_numpy(float),
         ff,
+        wind_ned,
     )
     df["an_mps2"], df["ae_mps2"], df["ad_mps2"] = acc[:, 0], acc[:, 1], acc[:, 2]
     return Trajectory(df, dict(traj.meta))

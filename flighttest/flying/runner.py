@@ -584,7 +584,7 @@ class MissionRunner:
         except OSError as exc:
             self.event("warning", what=f"params.json not written ({exc})")
         self.ff = self._feedforward(all_params, await link.autopilot_name())
-        self.stream_traj = for_autopilot(self.traj, self.ff)
+        self.stream_traj = for_autopilot(self.traj, self.ff, self.watch.wind_ned_mps())
         accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
         stats = trajectory_stats(self.traj, self.limits.region, accel, self.ff.drag_per_s, self.watch.wind_ned_mps())
         ab = self.cfg.abort
@@ -775,7 +775,7 @@ class MissionRunner:
             check_duration(chosen)
             self.traj = chosen.resample(self.fl.rate_hz)
             self.log.save_trajectory(chosen)
-        self.stream_traj = for_autopilot(self.traj, self.ff)
+        self.stream_traj = for_autopilot(self.traj, self.ff, wind.ned_mps)
         return True
 
     async def _ground_command(self, command: Awaitable[Any], timeout_s: float) -> None:
