@@ -35,8 +35,7 @@ of the sweep alone, on the RMS × hover scale of ``threshold_ratio``, for the re
 
 The stated **uncertainty** is the spread of a residual block bootstrap (the fitted curve times
 the data's own relative scatter, resampled in blocks of ``block_s`` because neighbouring samples
-are correlated, each from within ``local_s`` of where it goes because the scatter changes along the
-flight) combined with the speed resolution: the grid step and the
+are correlated) combined with the speed resolution: the grid step and the
 speed change over the two telemetry periods the signal needs near the onset.
 An onset is reported only when the fitted fluctuation at the fastest descent flown is at least
 ``threshold_ratio`` times the hover's (in RMS); otherwise the probe never reached it.
@@ -116,7 +115,6 @@ class IdentifyConfig:
     min_samples_above: int = 10  # a candidate onset needs this many samples faster than it
     n_boot: int = 100
     block_s: float = 1.0
-    local_s: float = 2.0  # a bootstrap block is drawn from within this of where it goes (local block bootstrap)
     min_speed_mps: float = 0.05  # the fit needs descending samples faster than this
     irls_iterations: int = 6
 
@@ -615,23 +613,17 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
         )  # fmt: skip
     # residual block bootstrap: the speeds flown stay as they were (the few samples past the onset
     # are the design, not something to resample away); the multiplicative scatter y/μ is resampled
-    # in blocks of consecutive samples, which keeps its correlation, each drawn from within local_s of
-    # where it goes: the scatter is not the same all flight, and a blip in a still hover (0.07 °/s, 158×
-    # the fake's noise-free hover) moved onto the sweep read as an onset in 18 of 100 replicates
-    # (bench/RESULTS.md, "The probe's uncertainty")
+    # in blocks of consecutive samples, which keeps its correlation (a local bootstrap was tried and
+    # reverted: bench/RESULTS.md, "The probe's uncertainty")
     rng = np.random.default_rng(0)
     n = len(y)
     mu = b0 + b1 * zs[k]
     ratio = y / mu
     block = max(1, round(cfg.block_s / dt))
     n_blocks = math.ceil(n / block)
-    reach = max(round(cfg.local_s / dt), block)
-    home = np.arange(n_blocks) * block
-    lo = np.clip(home - reach, 0, max(n - block, 0))
-    hi = np.clip(home + reach, 0, max(n - block, 0))
     boots = []
     for _ in range(cfg.n_boot):
-        starts = rng.integers(lo, hi + 1)
+        starts = rng.integers(0, max(n - block, 0) + 1, n_blocks)
         pick = (starts[:, None] + np.arange(block)[None, :]).ravel()[:n]
         boots.append(_onset_from(mu * ratio[pick], zs, grid, cfg.irls_iterations)[0])
     boots = np.asarray(boots)
