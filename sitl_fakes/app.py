@@ -267,7 +267,8 @@ STOP_WHY = {"SIGHUP": "SIGHUP (the terminal or shell that started it closed; `no
 
 
 def _loop(vehicle: FakePx4, link: Link, log: TruthLog, dt: float, stop: _Stop, duration_s: float) -> None:
-    parent = os.getppid()
+    # the launcher's pid (FakeVehicle): a parent that exited while this process started up is already gone
+    parent = int(os.environ.get("SITL_FAKES_PARENT_PID") or os.getppid())
     next_step = time.monotonic()
     next_parent_check = next_step + PARENT_POLL_S
     end = next_step + duration_s if duration_s > 0 else math.inf

@@ -74,7 +74,8 @@ class FakeVehicle:
         if self.proc is not None:
             return self
         self.truth_log.parent.mkdir(parents=True, exist_ok=True)
-        env = dict(os.environ, MAVLINK20="1", PYTHONUNBUFFERED="1")
+        # the fake stops when this process dies: told our pid, it sees a parent that died before its loop began
+        env = dict(os.environ, MAVLINK20="1", PYTHONUNBUFFERED="1", SITL_FAKES_PARENT_PID=str(os.getpid()))
         with open(self.stderr_path, "wb") as err:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "sitl_fakes", *self.args],

@@ -21,6 +21,7 @@ import pytest
 from flighttest.campaign.state import STEPS, CampaignState
 from flighttest.campaign.summary import REPORT_FILES
 from flighttest.errors import FlighttestError
+from flighttest.model.profiles import load_profile
 
 TRUTH_ONSET_MPS = 0.95
 
@@ -67,13 +68,21 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     assert steps["probe"]["outputs"]["log_dir"] == probe_log
     assert (out / "plans" / "helix.csv").stat().st_mtime == plan_mtime  # not planned again
 
-    # the identified onset is the fake's truth, stored in the campaign's profile copy, never the user's
-    # within the probe's stated tolerance (tests/test_probe_identify.py: the PX4-like estimate's vertical
-    # error is 0.16 m/s, correlated over 3 s)
-    assert s["identified_w_allow_mps"] == pytest.approx(TRUTH_ONSET_MPS, abs=0.15), json.loads(
-        (out / "identify.json").read_text())
+    # the onset the probe read, stored in the campaign's profile copy, never the user's. The PX4-like
+    # estimate's vertical error (0.16 m/s, correlated over 3 s) moves an onset read in one pass by as much,
+    # and identify's uncertainty says so: the truth lies within twice it, or the onset is refused (beyond
+    # 25 % of itself) and, its band reaching the prior, the prior is kept with a line saying so
+    ident = json.loads((out / "identify.json").read_text())
+    if s["onset_found"]:
+        assert abs(s["identified_w_allow_mps"] - TRUTH_ONSET_MPS) <= 2 * s["identified_uncertainty_mps"], ident
+        assert ident["estimate_error_mps"] >= 0.16 / ident["onset_passes"] ** 0.5 - 1e-9, ident
+        stored = s["identified_w_allow_mps"]
+    else:
+        assert "w_allow stays at prior" in s["identify_message"] and "at most 25%" in ident["refused"], ident
+        stored = s["prior_w_allow_mps"]
     assert Path(s["identified_profile"]) == out / "vehicles" / "x500.toml"
-    assert CampaignState.open(out, "x500").steps["plan"].outputs["w_allow_mps"] == s["identified_w_allow_mps"]
+    assert load_profile(out / "vehicles" / "x500.toml").w_allow_mps == pytest.approx(stored)
+    assert CampaignState.open(out, "x500").steps["plan"].outputs["w_allow_mps"] == pytest.approx(stored)
     assert not (tmp_path / "my_vehicles").exists()
     # both descents flown to the end with the guard silent, the helix clearly faster over the same height
     flights = {f["step"]: f for f in s["flights"]}

@@ -21,7 +21,9 @@ import pytest
 from sitl_fakes.launcher import FakeVehicle
 from test_fly_missions import FLY_TIMEOUT_S, ci_config, fly_cmd
 
-pytestmark = pytest.mark.flight
+# one worker flies the module's three flights once (pyproject's --dist loadgroup): spread over two, each flew
+# them (131 s apiece in CI's durations of ef96539)
+pytestmark = [pytest.mark.flight, pytest.mark.xdist_group("one_descent")]
 
 MISSIONS = ("vertical", "helix", "probe")
 # what these flights check is the analysis, not the stale-telemetry rule: 0.8 s at 50 Hz, so a machine loaded

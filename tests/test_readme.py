@@ -160,7 +160,9 @@ def test_the_readme_block_runs_against_the_fake(index, readme_fake, tmp_path):
         assert (work / out / "report" / "velocity_space.png").stat().st_size > 10_000
     else:  # the steps by hand: what each one writes
         here = work / "rehearsal"
-        assert (here / "vehicles" / "x500.toml").is_file() or "no onset up to" in proc.stdout
+        # the onset stored, or none found, or one refused (the estimate's error: README, "Each step by hand")
+        assert (here / "vehicles" / "x500.toml").is_file() or "no onset up to" in proc.stdout or \
+            "is not a plausible VRS onset" in proc.stderr  # fmt: skip
         for png in ("vertical.png", "helix.png"):
             assert (here / png).stat().st_size > 10_000
         assert (here / "report" / "report.md").is_file()

@@ -82,6 +82,12 @@ def test_a_speed_the_planner_cannot_serve_is_left_out_and_said(cache):
     plans = helix_plans_for_winds(prof, PLAN, [1.0, 2.0, 3.0], 1.25, CountingSolver(prof, fail_at=2.0), said.append)
     assert [t.meta["problem"]["wind_ned_mps"][1] for t in plans] == [1.0, 3.0]
     assert any(s.startswith("no helix for 2 m/s of wind: the planner did not converge") for s in said)
+    # the next flight does not spend the planner's time on it again, and says why it has no plan for it
+    solver, said = CountingSolver(prof, fail_at=2.0), []
+    again = helix_plans_for_winds(prof, PLAN, [1.0, 2.0, 3.0], 1.25, solver, said.append)
+    assert solver.calls == [] and [t.meta["problem"]["wind_ned_mps"][1] for t in again] == [1.0, 3.0]
+    assert any(s.startswith("no helix for 2 m/s of wind: the planner did not converge") and "planned before" in s
+               for s in said)  # fmt: skip
 
 
 def test_two_flights_planning_the_same_winds_at_once_plan_each_only_once(cache):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import errno
 import math
 import os
@@ -17,6 +18,7 @@ from rich.text import Text
 
 from flighttest.analysis import legend
 from flighttest.analysis.compare import add_param_differences, add_speedup, compare_row, refused_speedups
+from flighttest.analysis.identify import IdentifyConfig
 from flighttest.console import console, print_json
 from flighttest.errors import FlighttestError
 from flighttest.flying.wind import WIND_COVERAGE_SIGMAS
@@ -120,6 +122,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=2.0,
         metavar="RATIO",
         help="fluctuation rise that counts as the onset, × hover (default 2)",
+    )
+    pi.add_argument(
+        "--velocity-sd",
+        type=float,
+        default=None,
+        metavar="MPS",
+        help="the velocity estimate's vertical error, 1 σ, which moves the onset read from one pass through it "
+        f"alike (default {IdentifyConfig().velocity_sd_mps:g}, PX4 EKF2's with GNSS; lower it for RTK or motion "
+        "capture)",
     )
     pi.add_argument(
         "--write-profile",
@@ -685,6 +696,7 @@ def _detail(exc: BaseException) -> str:
 
 
 MAX_THRESHOLD_RATIO = 10.0  # beyond this no real onset would count, and "no onset up to X" would be invented
+MAX_VELOCITY_SD_MPS = 2.0  # an estimate worse than this has no onset to give to a quarter of itself
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
@@ -697,6 +709,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.threshold) and 1.0 < args.threshold <= MAX_THRESHOLD_RATIO):
         raise FlighttestError(f"--threshold must be a number > 1 and at most {MAX_THRESHOLD_RATIO:g} "
                               f"(got {args.threshold})")  # fmt: skip
+    cfg = IdentifyConfig(threshold_ratio=args.threshold)
+    if args.velocity_sd is not None:
+        if not (math.isfinite(args.velocity_sd) and 0.0 <= args.velocity_sd <= MAX_VELOCITY_SD_MPS):
+            raise FlighttestError(f"--velocity-sd must be a number of m/s from 0 to {MAX_VELOCITY_SD_MPS:g} "
+                                  f"(got {args.velocity_sd})")  # fmt: skip
+        cfg = dataclasses.replace(cfg, velocity_sd_mps=args.velocity_sd)
     from flighttest.analysis.batch import quiet_numerics
 
     profile = load_profile(args.vehicle)
@@ -709,7 +727,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     try:
         with quiet_numerics():
             log = load_log(args.log)
-            onset = identify_onset(log, profile, IdentifyConfig(threshold_ratio=args.threshold))
+            onset = identify_onset(log, profile, cfg)
     except NoOnset as none:
         line = no_onset_line(none.lower_bound_mps, prior)
         if args.json:

@@ -552,7 +552,10 @@ class MissionRunner:
     async def _preflight(self) -> PreflightResult:
         self.set_phase(Phase.PREFLIGHT)
         link, req = self.link, self.req
-        await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health), 5.0)
+        # the mode too: read before its first heartbeat arrived, "UNKNOWN" left ArduCopter in STABILIZE, not asked
+        # to leave it, and the preflight failed on it (CI of 5b3ce63, a busy box)
+        await link.wait_for(lambda s: s.t_posvel is not None and s.t_att is not None and bool(s.health)
+                            and s.flight_mode != "UNKNOWN", 5.0)  # fmt: skip
         rules = self.rules
         # the campaign's next flight on the same vehicle: PX4 stays in Offboard after an offboard flight
         # lands, ArduCopter in LAND; neither arms from there (autopilot.AutopilotRules.not_armable_modes)
