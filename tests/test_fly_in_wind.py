@@ -47,7 +47,9 @@ CASES = [  # (vehicle, the fake's options, mission, wind NED, gust sd)
 # The x500's drag is known to ±8 % (rel_sd): in 3 m/s of air its hover's wind is uncertain by about 0.28 m/s,
 # and the guard judges the worst air within 2.45 σ (0.69 m/s) while the helix plunges. On the fake that can end
 # the helix in a guard abort with the truth clear (bench/RESULTS.md, "Plans for the wind"): never optimistic.
-HELIX_MAY_ABORT_CONSERVATIVELY = {("x500", "helix")}
+# In 0.6 m/s of gusts arducopter_sitl's helix too: CI of 42ffe24 aborted it "marginal" at w 0.60, u 2.25 m/s
+# with the truth clear (bench/RESULTS.md, "The estimate's error in the onset", its last paragraph).
+HELIX_MAY_ABORT_CONSERVATIVELY = {("x500", "helix"), ("arducopter_sitl", "helix")}
 
 
 @pytest.mark.parametrize(("vehicle", "options", "mission", "wind", "gust"), CASES,

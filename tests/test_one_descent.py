@@ -21,9 +21,7 @@ import pytest
 from sitl_fakes.launcher import FakeVehicle
 from test_fly_missions import FLY_TIMEOUT_S, ci_config, fly_cmd
 
-# one worker flies the module's three flights once (pyproject's --dist loadgroup): spread over two, each flew
-# them (131 s apiece in CI's durations of ef96539)
-pytestmark = [pytest.mark.flight, pytest.mark.xdist_group("one_descent")]
+pytestmark = pytest.mark.flight
 
 MISSIONS = ("vertical", "helix", "probe")
 # what these flights check is the analysis, not the stale-telemetry rule: 0.8 s at 50 Hz, so a machine loaded
@@ -90,8 +88,17 @@ def _close(a, b, tol) -> bool:
     return a is not None and b is not None and abs(a - b) <= tol
 
 
-@pytest.mark.parametrize("mission", ["vertical", "helix"])
-def test_fly_analyse_compare_and_report_give_one_descent(flown, analysed, compared, reported, mission):
+def test_fly_analyse_compare_and_report_give_each_flight_one_descent(flown, analysed, compared, reported):
+    """One test item, so one worker flies the three flights: as five items xdist spread them over both
+    workers, and each flew them (131 s apiece, CI of ef96539; xdist's loadgroup does not group under pytest 9)."""
+    for mission in ("vertical", "helix"):
+        check_one_descent(flown, analysed, compared, reported, mission)
+    check_the_vertical_reached_its_end(flown)
+    check_the_probe_has_no_descent_time_anywhere(flown, analysed, compared, reported)
+    check_compare_says_the_vertical_and_the_helix_differ(flown)
+
+
+def check_one_descent(flown, analysed, compared, reported, mission) -> None:
     fly = flown[mission]["fly"]
     live, post = fly["main_descent"], analysed[mission]["main_descent"]
     reached = live["reached"]
@@ -137,12 +144,12 @@ def test_fly_analyse_compare_and_report_give_one_descent(flown, analysed, compar
     assert analysed[mission]["tracking_error"]["max_m"] < 2.0
 
 
-def test_the_vertical_reached_its_end(flown):
+def check_the_vertical_reached_its_end(flown) -> None:
     """The checks above saw a descent reached at least once (the vertical baseline's)."""
     assert flown["vertical"]["fly"]["outcome"] == "completed" and flown["vertical"]["fly"]["main_descent"]["reached"]
 
 
-def test_the_probe_has_no_descent_time_anywhere(flown, analysed, compared, reported):
+def check_the_probe_has_no_descent_time_anywhere(flown, analysed, compared, reported) -> None:
     fly = flown["probe"]["fly"]
     assert fly["descent_time_s"] is None and fly["main_descent"]["descent_time_s"] is None
     assert "returns to its start" in fly["main_descent"]["note"]
@@ -157,7 +164,7 @@ def test_the_probe_has_no_descent_time_anywhere(flown, analysed, compared, repor
     assert all(x["mean_rate_mps"] <= x["max_rate_mps"] for x in analysed["probe"]["descents"])
 
 
-def test_compare_says_the_vertical_and_the_helix_differ(flown):
+def check_compare_says_the_vertical_and_the_helix_differ(flown) -> None:
     """The vertical 5 → 2 m and the helix 7 → 2 m: compare says so, and gives no speed-up unless asked
     (refused with exit code 2 where both have a descent time to divide)."""
     v, h = (str(flown[m]["folder"]) for m in ("vertical", "helix"))

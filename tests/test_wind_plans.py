@@ -31,6 +31,7 @@ class CountingSolver:
 
     def __init__(self, profile, fail_at: float | None = None, delay_s: float = 0.0):
         self.profile, self.fail_at, self.delay_s, self.calls = profile, fail_at, delay_s, []
+        self.error = "the planner did not converge (Infeasible_Problem_Detected)"
         self.lock = threading.Lock()
 
     def __call__(self, speed_mps: float, radius_mps: float):
@@ -38,7 +39,7 @@ class CountingSolver:
             self.calls.append(speed_mps)
         time.sleep(self.delay_s)
         if speed_mps == self.fail_at:
-            raise FlighttestError("the planner did not converge (Infeasible_Problem_Detected)")
+            raise FlighttestError(self.error)
         tr = vertical_trajectory(plan_vertical(self.profile, height_m=2.0), self.profile.name, self.profile.mass_kg)
         tr.meta["problem"] = {"wind_ned_mps": [0.0, speed_mps, 0.0], "wind_radius_mps": radius_mps}
         return tr
@@ -88,6 +89,17 @@ def test_a_speed_the_planner_cannot_serve_is_left_out_and_said(cache):
     assert solver.calls == [] and [t.meta["problem"]["wind_ned_mps"][1] for t in again] == [1.0, 3.0]
     assert any(s.startswith("no helix for 2 m/s of wind: the planner did not converge") and "planned before" in s
                for s in said)  # fmt: skip
+
+
+def test_a_speed_the_planner_ran_out_of_time_for_is_tried_again(cache):
+    # SOLVE_MAX_S stopped it: a busier machine may have, so the next flight plans it again
+    prof = load_profile("x500")
+    timed_out = CountingSolver(prof, fail_at=2.0)
+    timed_out.error = "the planner did not converge (Maximum_WallTime_Exceeded)"
+    helix_plans_for_winds(prof, PLAN, [1.0, 2.0], 1.25, timed_out)
+    solver = CountingSolver(prof)
+    again = helix_plans_for_winds(prof, PLAN, [1.0, 2.0], 1.25, solver)
+    assert solver.calls == [2.0] and [t.meta["problem"]["wind_ned_mps"][1] for t in again] == [1.0, 2.0]
 
 
 def test_two_flights_planning_the_same_winds_at_once_plan_each_only_once(cache):
