@@ -142,6 +142,7 @@ PROVENANCE_PATH_CHARS = 400  # of the probe log's path in a stored w_allow's sou
 # 0.635 ± 0.175 read for 0.848)
 AGREES_SIGMAS = 2.0
 ONSET_BAND_MPS = 0.1  # the samples an onset is read from: descending within this of it
+RESOLUTION_SAMPLES = 5  # the speed resolution is the speed's rate at this many samples just past the onset
 MAX_SWEEP_GAP_S = 1.0  # a telemetry gap this long inside the sweep: the log is damaged, not a slow link
 
 
@@ -659,7 +660,10 @@ def identify_onset(log: FlightLog, profile: VehicleProfile, cfg: IdentifyConfig 
     # speed resolution: the grid (uniform, /√12), and how far w moves in the two sample periods the
     # fluctuation signal needs (the difference, and the alignment of the IMU and position streams),
     # taken as a uniform error of that half-width (/√3)
-    near = use & (w_all >= w0) & (w_all <= w0 + 0.05)  # just past the onset, where the rise is seen
+    # just past the onset, where the rise is seen: the few samples nearest above it (a fast sweep can jump a
+    # fixed band between two samples, and an empty band read as no resolution at all: ±0.005 m/s, CI of b383b95)
+    past = np.flatnonzero(use & (w_all >= w0))
+    near = past[np.argsort(w_all[past] - w0)[:RESOLUTION_SAMPLES]]
     dw = np.abs(np.gradient(w_filled, t))[near] * 2.0 * dt
     lag_w = float(np.median(dw)) if len(dw) else 0.0
     resolution = math.sqrt(cfg.step_mps**2 / 12.0 + lag_w**2 / 3.0)
