@@ -25,6 +25,7 @@ from flighttest.flying.wind import WIND_COVERAGE_SIGMAS
 from flighttest.inputs import FINITE, Range, atomic_write, check_output_path, check_path_text
 
 JOBS = Range(1, 256, integer=True)  # worker processes (flighttest.analysis.batch.MAX_JOBS)
+VELOCITY_SD = Range(0.0, 2.0, "m/s")  # an estimate worse than 2 m/s has no onset to give to a quarter of itself
 
 SEG_OPTIONS = {  # option → SegmentConfig field
     "rate_threshold": "rate_threshold_mps",
@@ -125,7 +126,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     pi.add_argument(
         "--velocity-sd",
-        type=float,
+        type=VELOCITY_SD,
         default=None,
         metavar="MPS",
         help="the velocity estimate's vertical error, 1 σ, which moves the onset read from one pass through it "
@@ -696,7 +697,6 @@ def _detail(exc: BaseException) -> str:
 
 
 MAX_THRESHOLD_RATIO = 10.0  # beyond this no real onset would count, and "no onset up to X" would be invented
-MAX_VELOCITY_SD_MPS = 2.0  # an estimate worse than this has no onset to give to a quarter of itself
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
@@ -711,9 +711,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
                               f"(got {args.threshold})")  # fmt: skip
     cfg = IdentifyConfig(threshold_ratio=args.threshold)
     if args.velocity_sd is not None:
-        if not (math.isfinite(args.velocity_sd) and 0.0 <= args.velocity_sd <= MAX_VELOCITY_SD_MPS):
-            raise FlighttestError(f"--velocity-sd must be a number of m/s from 0 to {MAX_VELOCITY_SD_MPS:g} "
-                                  f"(got {args.velocity_sd})")  # fmt: skip
         cfg = dataclasses.replace(cfg, velocity_sd_mps=args.velocity_sd)
     from flighttest.analysis.batch import quiet_numerics
 
