@@ -5,11 +5,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
-from flighttest.flying.feedforward import CatchUpLimit, Feedforward, feedforward_accel_ned, z_position_gain_per_s
+from flighttest.flying.feedforward import (
+    CatchUpLimit,
+    Feedforward,
+    feedforward_accel_ned,
+    for_autopilot,
+    wind_share_ned,
+    z_position_gain_per_s,
+)
 from flighttest.model.aero import G_MPS2
 from flighttest.model.profiles import load_profile
+from flighttest.model.trajectory import Trajectory
 from sitl_fakes.control import Controller, Limits, Target
 from sitl_fakes.physics import RigidBodyState
 
@@ -29,6 +38,23 @@ def test_drag_is_added_along_the_air_relative_velocity():
     ff = Feedforward(lead_s=0.0, drag_per_s=0.5, decoupled=False)
     out = feedforward_accel_ned(T, vel, np.zeros_like(vel), ff, wind_ned=(1.0, 0.0, 0.0))
     assert out[0] == pytest.approx([0.5 * 1.0, -0.5, 0.25])
+
+
+def test_a_plan_over_one_point_sends_no_wind_drag_and_one_that_travels_does():
+    """The vertical and the probe start from a hover whose integrator holds the wind's drag already."""
+    n = 50
+    t = np.arange(n) * 0.1
+    still = pd.DataFrame({"t_s": t, "n_m": 0.0, "e_m": 0.0, "d_m": -7.0 + 0.3 * t, "vn_mps": 0.0, "ve_mps": 0.0,
+                          "vd_mps": 0.3, "an_mps2": 0.0, "ae_mps2": 0.0, "ad_mps2": 0.0, "yaw_deg": 0.0})  # fmt: skip
+    travels = still.assign(e_m=0.4 * t, ve_mps=0.4)
+    wind = (0.0, -3.0, 0.0)
+    ff = Feedforward(lead_s=0.0, drag_per_s=1.0, decoupled=False)
+    assert wind_share_ned(Trajectory(still, {}), wind) == (0.0, 0.0, 0.0)
+    assert wind_share_ned(Trajectory(travels, {}), wind) == wind
+    sent_still = for_autopilot(Trajectory(still, {}), ff, wind).df
+    sent_travels = for_autopilot(Trajectory(travels, {}), ff, wind).df
+    assert sent_still["ae_mps2"].to_numpy() == pytest.approx(0.0)  # the plan's own velocity's drag only
+    assert sent_travels["ae_mps2"].to_numpy() == pytest.approx(0.4 + 3.0)
 
 
 @pytest.mark.parametrize("a_down", [-3.0, 0.0, 4.0])
