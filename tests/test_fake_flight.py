@@ -267,7 +267,9 @@ def test_offboard_loss_failsafe_after_com_of_loss_t(fake_vehicle_factory):
     failsafe = df[df.kind == "failsafe"]
     assert len(failsafe) == 1
     delay = float(failsafe.t_s.iloc[0]) - last_sp
-    assert 0.6 <= delay < 0.6 + 0.1  # checked every 4 ms step; allow scheduling jitter
+    # checked every 4 ms step; allow scheduling jitter. The lower bound to a rounding: the truth log's times
+    # are sums of steps, 0.5999999999999996 s in a new user's clone of 61204eb
+    assert 0.6 - 1e-9 <= delay < 0.6 + 0.1
     assert "OFFBOARD->HOLD" in " ".join(df[df.kind == "mode"].detail.astype(str))
     st = states(df)
     assert -st.d_m.min() == pytest.approx(1.0, abs=0.3)  # it flew the setpoint before the loss
