@@ -90,7 +90,7 @@ def test_compare_at_80_columns_with_long_folder_names(monkeypatch):
     assert "completed" in text
     wide = _render(monkeypatch, 80, lambda: cli.compare_tables(rows, wide=True))
     assert "…" not in wide and all(name in wide for name in LONG) and " min margin m/s " in wide
-    text = _render(monkeypatch, 250, lambda: cli.compare_tables(rows))
+    text = _render(monkeypatch, 270, lambda: cli.compare_tables(rows))
     assert "…" not in text and all(f" {h} " in text for h in ["log", "mission", *cli.COMPARE_COLUMNS])
 
 

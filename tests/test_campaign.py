@@ -104,6 +104,16 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     assert (out / "report" / "velocity_space.png").stat().st_size > 20_000
     md = (out / "report" / "summary.md").read_text()
     assert "| | vertical baseline | helix |" in md and f"{s['speedup_helix_vs_vertical']:.2f}×" in md
+    # the efficiency figure (issue 22): hover to hover, never before the vertical axis says the descent ended,
+    # against the optimum the plan step stored with each plan, which the margins keep both plans above
+    for name in ("vertical", "helix"):
+        f, plan = flights[name], steps["plan"]["outputs"]
+        assert f["hover_to_hover_s"] >= f["descent_time_s"] - 1e-3, f
+        assert f["optimum_s"] == plan[f"{name}_optimum_s"] < f["planned_descent_s"], (f, plan)
+        assert f["flown_over_optimum"] == pytest.approx(f["hover_to_hover_s"] / f["optimum_s"], abs=1e-3)
+        assert s[f"{name}_flown_over_optimum"] == f["flown_over_optimum"] > 1.0
+    assert f"the helix took {s['helix_flown_over_optimum']:.2f}× its optimum" in md
+    assert "| flown / optimum × (hover to hover) |" in md
     compare = pd.read_csv(out / "report" / "compare.csv")
     assert list(compare["step"]) == ["vertical", "helix"]
     # the fake never crashed

@@ -19,6 +19,7 @@ from flighttest.flying import guard as gd
 from flighttest.flying.autopilot import ARDUPILOT
 from flighttest.flying.mission_scripts import load_mission_module
 from flighttest.flying.runner import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, FlyRequest, MissionRunner
+from flighttest.planner.optimum import vertical_optimum
 from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
 from sitl_fakes.scripted import ScriptedAutopilot
 from sitl_fakes.virtual_time import run_virtual
@@ -36,6 +37,13 @@ def test_a_nominal_flight_descends_times_its_descent_and_lands(tmp_path):
     reached = next(e for e in f.events if e["event"] == "descent_reached")
     assert reached["descent_time_s"] == pytest.approx(f.outcome.descent_time_s, abs=0.01)
     assert reached["height_error_m"] <= 0.2
+    # hover to hover (issue 22): no sooner than the vertical axis, against the planner's optimum for the plan
+    hover = next(e for e in f.events if e["event"] == "hover_reached")
+    assert f.summary["hover_to_hover_s"] == hover["hover_to_hover_s"] >= round(f.outcome.descent_time_s, 3)
+    assert f.summary["optimum_s"] == vertical_optimum(X500, DESCENT_M).optimum_s < plan_s
+    assert f.summary["flown_over_optimum"] == pytest.approx(f.summary["hover_to_hover_s"] / f.summary["optimum_s"],
+                                                            abs=1e-3)  # fmt: skip
+    assert f.summary["main_descent"]["flown_over_optimum"] == f.summary["flown_over_optimum"] > 1.0
     assert f.summary["final_armed"] is False and f.summary["final_mode"] == "LAND"
     assert f.ap.p_ned[2] == 0.0 and not f.ap.armed
     assert f.ap.takeoff_alt_m == START_M  # PX4's takeoff is asked for the start height, as ever

@@ -19,6 +19,7 @@ from flighttest.analysis.descent_time import (
     TIMED_EVENT,
     is_abort_phase,
 )
+from flighttest.planner.optimum import EFFICIENCY_KEYS
 
 # two main descents "start at the same height and descend as far" within this (the descent-time rule's
 # end band is ±0.2 m, so two flights of one plan can end 0.4 m apart in the worst case; settling at the
@@ -203,6 +204,7 @@ def compare_row(
         # where it started and what was planned, even for a descent the abort cut before it was one
         row.update(start_height_m=main.get("start_height_m"), planned_descent_s=main.get("planned_descent_s"),
                    planned_height_m=main.get("planned_height_m"), main_basis=main.get("basis"))  # fmt: skip
+        row.update({k: main.get(k) for k in EFFICIENCY_KEYS})  # hover to hover against the planner's optimum
     row["main_descent_note"] = no_main_descent_why(descents, events)
     if events is not None and any(e.get("event") == "stream_start" for e in events):  # flighttest's own flight
         flown = flown_descent(events)

@@ -81,15 +81,36 @@ class DescentRule:
     height_tol_m: float = 0.2
     settled_vd_mps: float = 0.2
     hold_s: float = 0.5
+    # hover to hover (``HOVER_RULE``): also this close to the end point sideways and this slow across
+    horizontal_tol_m: float | None = None
+    settled_vh_mps: float | None = None
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
+            if value is None and name in ("horizontal_tol_m", "settled_vh_mps"):
+                continue
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise FlighttestError(f"descent rule {name} must be a finite number > 0 (got {value!r})")
+        if (self.horizontal_tol_m is None) != (self.settled_vh_mps is None):
+            raise FlighttestError("descent rule: horizontal_tol_m and settled_vh_mps go together")
+
+    @property
+    def horizontal(self) -> bool:
+        return self.horizontal_tol_m is not None
 
     def describe(self) -> str:
+        if self.horizontal:
+            return (f"within {self.height_tol_m:g} m of the end point's height and {self.horizontal_tol_m:g} m of it "
+                    f"sideways, vertical speed within {self.settled_vd_mps:g} m/s and horizontal within "
+                    f"{self.settled_vh_mps:g} m/s, all for {self.hold_s:g} s")  # fmt: skip
         return (f"height within {self.height_tol_m:g} m of the end point's and vertical speed within "
                 f"{self.settled_vd_mps:g} m/s, both for {self.hold_s:g} s")  # fmt: skip
+
+
+# Hover to hover, the paper's problem and the efficiency figure's basis (``hover_to_hover_s``): the vertical
+# rule and the end point sideways. 0.5 m and 0.3 m/s hold PX4 SITL's and ArduCopter SITL's hovers at the end
+# point in every reference flight (bench/RESULTS.md, "Hover to hover"), yet a helix still turning is not home.
+HOVER_RULE = DescentRule(horizontal_tol_m=0.5, settled_vh_mps=0.3)
 
 
 @dataclass(frozen=True)
@@ -159,13 +180,15 @@ class PlannedDescent:
     t_f_s: float  # the plan's last row
 
 
-def planned_descent(t_s, n_m, e_m, d_m, vd_mps, rule: DescentRule | None = None) -> PlannedDescent | None:
+def planned_descent(t_s, n_m, e_m, d_m, vd_mps, rule: DescentRule | None = None, vn_mps=None,
+                    ve_mps=None) -> PlannedDescent | None:  # fmt: skip
     """The plan (rows relative to its start, as ``trajectory.csv`` holds them) timed by the same rule as
     the flight, so a vehicle flying it exactly shows the same time. None for an empty or broken plan."""
     cols = [np.asarray(x, dtype=float) for x in (t_s, n_m, e_m, d_m, vd_mps)]
     if not len(cols[0]) or not all(np.isfinite(c).all() for c in cols):
         return None
     t, n, e, d, vd = cols
+    vn, ve = (np.zeros_like(t) if v is None else np.asarray(v, dtype=float) for v in (vn_mps, ve_mps))
     rule = rule or DescentRule()
     t_f = float(t[-1])
     end = (float(n[-1]), float(e[-1]), float(d[-1]))
@@ -179,7 +202,8 @@ def planned_descent(t_s, n_m, e_m, d_m, vd_mps, rule: DescentRule | None = None)
     pad = np.ones(len(hold))
     r = descent_reached(tt, np.concatenate([n, end[0] * pad]), np.concatenate([e, end[1] * pad]),
                         np.concatenate([d, end[2] * pad]), np.concatenate([vd, 0.0 * pad]), float(t[0]), end,
-                        rule=rule)  # fmt: skip
+                        rule=rule, vn_mps=np.concatenate([vn, 0.0 * pad]),
+                        ve_mps=np.concatenate([ve, 0.0 * pad]))  # fmt: skip
     return PlannedDescent(r.descent_time_s if r is not None else None, height, fastest, t_f)
 
 
@@ -193,14 +217,17 @@ class DescentTimer:
         self.rule = rule or DescentRule()
         self.result: DescentReached | None = None
         self._since: tuple[float, float, float, float, float] | None = None  # t, n, e, d of the hold's start
-        self._heights: collections.deque[tuple[float, float]] = collections.deque()  # (t, d) over hold_s
+        self._heights: collections.deque[tuple[float, float, float, float]] = collections.deque()  # (t, n, e, d)
         self._start: tuple[float, float, float, float] | None = None  # t, n, e, d: the first sample
         self._last: tuple[float, float, float, float] | None = None  # t, n, e, d: the latest sample
         self._recent: collections.deque[tuple[float, float]] = collections.deque()  # (t, d) over RATE_WINDOW_S
         self._max_rate = -math.inf  # the height's fastest fall over RATE_WINDOW_S so far
         self._max_at_since = -math.inf  # ... up to the instant the hold began (the descent's end)
 
-    def update(self, t_s: float, n_m: float, e_m: float, d_m: float, vd_mps: float) -> DescentReached | None:
+    def update(self, t_s: float, n_m: float, e_m: float, d_m: float, vd_mps: float,
+               vn_mps: float = math.nan, ve_mps: float = math.nan) -> DescentReached | None:  # fmt: skip
+        """One estimate sample; the horizontal velocity only counts for a rule with a horizontal part (NaN:
+        the position's own rate alone)."""
         if self.result is not None or t_s < self.t_start_s:
             return None
         r, end = self.rule, self.end_ned_m
@@ -209,16 +236,20 @@ class DescentTimer:
             self._heights.clear()
             self._recent.clear()
         else:
-            self._heights.append((t_s, d_m))
+            self._heights.append((t_s, n_m, e_m, d_m))
             while t_s - self._heights[0][0] > r.hold_s:
                 self._heights.popleft()
             self._track(t_s, n_m, e_m, d_m)
         vd = abs(vd_mps)
-        t_old, d_old = self._heights[0] if self._heights else (t_s, d_m)
+        vh = math.hypot(vn_mps, ve_mps) if math.isfinite(vn_mps) and math.isfinite(ve_mps) else math.inf
+        t_old, n_old, e_old, d_old = self._heights[0] if self._heights else (t_s, n_m, e_m, d_m)
         if t_s - t_old >= 0.9 * r.hold_s:  # a full window: the height's own rate counts too
             vd = min(vd, abs(d_m - d_old) / (t_s - t_old))
+            vh = min(vh, math.hypot(n_m - n_old, e_m - e_old) / (t_s - t_old))
         inside = all(math.isfinite(v) for v in values) and abs(d_m - end[2]) <= r.height_tol_m \
             and vd <= r.settled_vd_mps  # fmt: skip
+        if inside and r.horizontal:
+            inside = math.hypot(n_m - end[0], e_m - end[1]) <= r.horizontal_tol_m and vh <= r.settled_vh_mps
         if not inside:  # a gap in the data (NaN) breaks the hold like a sample outside it
             self._since = None
             return None
@@ -260,21 +291,24 @@ class DescentTimer:
 
 def descent_reached(
     t_s, n_m, e_m, d_m, vd_mps, t_start_s: float, end_ned_m, t_stop_s: float | None = None,
-    rule: DescentRule | None = None,
+    rule: DescentRule | None = None, vn_mps=None, ve_mps=None,
 ) -> DescentReached | None:  # fmt: skip
     """:class:`DescentTimer` over arrays (samples in time order), from ``t_start_s`` until ``t_stop_s``
     (the end of the descent's phases: the hold must be complete by then)."""
-    return _timed(t_s, n_m, e_m, d_m, vd_mps, t_start_s, end_ned_m, t_stop_s, rule).result
+    return _timed(t_s, n_m, e_m, d_m, vd_mps, t_start_s, end_ned_m, t_stop_s, rule, vn_mps, ve_mps).result
 
 
-def _timed(t_s, n_m, e_m, d_m, vd_mps, t_start_s, end_ned_m, t_stop_s, rule) -> DescentTimer:
+def _timed(t_s, n_m, e_m, d_m, vd_mps, t_start_s, end_ned_m, t_stop_s, rule, vn_mps=None, ve_mps=None) -> DescentTimer:
     """A :class:`DescentTimer` fed the samples from ``t_start_s`` until it is met or ``t_stop_s``."""
     timer = DescentTimer(t_start_s, end_ned_m, rule)
-    cols = [np.asarray(x, dtype=float) for x in (t_s, n_m, e_m, d_m, vd_mps)]
+    nan = np.full(len(np.asarray(t_s)), np.nan)
+    cols = [np.asarray(x, dtype=float) for x in (t_s, n_m, e_m, d_m, vd_mps, nan if vn_mps is None else vn_mps,
+                                                 nan if ve_mps is None else ve_mps)]  # fmt: skip
     t = cols[0]
     sel = (t >= t_start_s) & (t <= (math.inf if t_stop_s is None else t_stop_s))
-    for t_k, n_k, e_k, d_k, vd_k in zip(*(c[sel] for c in cols)):
-        if timer.update(float(t_k), float(n_k), float(e_k), float(d_k), float(vd_k)) is not None:
+    for t_k, n_k, e_k, d_k, vd_k, vn_k, ve_k in zip(*(c[sel] for c in cols)):
+        if timer.update(float(t_k), float(n_k), float(e_k), float(d_k), float(vd_k), float(vn_k),
+                        float(ve_k)) is not None:  # fmt: skip
             break
     return timer
 
@@ -367,7 +401,7 @@ def from_log(log, rule: DescentRule | None = None) -> LogDescent | None:
     vd = s["vd_est_mps"] if "vd_est_mps" in s else s.get("vd_mps")
     if vd is None:
         return None
-    timer = _timed(s["t_s"], s["n_m"], s["e_m"], d, vd, t0, end, stop, rule)
+    timer = _timed(s["t_s"], s["n_m"], s["e_m"], d, vd, t0, end, stop, rule, s.get("vn_mps"), s.get("ve_mps"))
     reached = timer.result
     t_end = float(s["t_s"].iloc[-1]) if math.isinf(stop) else stop
     why = None if reached else not_reached(rule, _what)
@@ -394,7 +428,7 @@ def event_of(timed: LogDescent, rule: DescentRule | None = None) -> dict:
 MAIN_DESCENT_KEYS = (
     "basis", "start_s", "end_s", "start_unix_s", "duration_s", "descent_time_s", "planned_descent_s",
     "start_height_m", "height_m", "planned_height_m", "mean_rate_mps", "max_rate_mps", "planned_max_rate_mps",
-    "horizontal_error_m", "reached", "note",
+    "horizontal_error_m", "reached", "note", "hover_to_hover_s", "optimum_s", "flown_over_optimum",
 )  # fmt: skip
 
 

@@ -4,7 +4,7 @@ campaign's ``summary.md``), so a header never means two things."""
 
 from __future__ import annotations
 
-from flighttest.analysis.descent_time import RATE_WINDOW_S, DescentRule
+from flighttest.analysis.descent_time import HOVER_RULE, RATE_WINDOW_S, DescentRule
 from flighttest.analysis.exposure import NEAR_MPS
 from flighttest.flying.wind import WIND_COVERAGE_SIGMAS
 
@@ -38,6 +38,9 @@ COLUMNS: dict[str, str] = {
     f"its end height with its vertical speed settled ({DescentRule().describe()}); logs of other "
     "programs: the main descent's duration",
     "planned s": "the plan timed by the same rule: what the descent takes when flown exactly",
+    "hover→hover s": f"from the first setpoint of the planned descent until {HOVER_RULE.describe()}",
+    "÷ optimum": "hover to hover over the planner's optimum for the same vehicle, height, end point and wind "
+    "(no guard margin, the vehicle's full limits; 1 = flown as fast as the planner can)",
     "horiz. err m": "off the end point sideways at that instant",
     "speed-up ×": "the first log's descent time over this one's (– where they differ in start "
     "height or height, unless --allow-unequal)",

@@ -55,6 +55,7 @@ from flighttest.analysis.segment import GLITCH_COLUMNS, SegmentConfig, find_desc
 from flighttest.errors import FlighttestError
 from flighttest.inputs import display_path
 from flighttest.model.profiles import SHIPPED_DIR, VehicleProfile, load_profile, profile_as_flown
+from flighttest.planner.optimum import EFFICIENCY_KEYS, efficiency, logged_optimum_s
 
 
 @dataclass
@@ -105,6 +106,7 @@ class Analysis:
             "outcome": flight_summary(self.log.meta).get("outcome"),
             "abort_reason": flight_summary(self.log.meta).get("abort_reason"),
             "main_descent": self.main,
+            **{k: (self.main or {}).get(k) for k in EFFICIENCY_KEYS},  # hover to hover against the optimum
             "main_descent_note": self.main_note,
             "tracking_error": self.tracking_summary(),
             "duration_s": float(self.log.state["t_s"].iloc[-1]),
@@ -406,6 +408,9 @@ def _main_descent(
                                         note=timed.why)  # fmt: skip
         if not descents["main"].any():  # cut short by the abort before it was a descent
             rec["note"] = f"{timed.why}; {why}" if why else timed.why
+        hover = dtime.from_log(log, dtime.HOVER_RULE)
+        reached = hover.reached if hover is not None else None
+        rec.update(efficiency(reached.descent_time_s if reached else None, logged_optimum_s(log.meta)))
         return rec, why
     main = primary_descent(descents, log.events)
     if main is None:

@@ -29,6 +29,7 @@ from flighttest.flying.outcome import Outcome
 from flighttest.inputs import atomic_write
 from flighttest.model.profiles import VehicleProfile, load_profile, profile_to_dict, write_w_allow
 from flighttest.model.trajectory import Trajectory
+from flighttest.planner.optimum import EFFICIENCY_KEYS, OPTIMUM_KEY, with_optimum
 
 # the outcomes that make a flight step done (docs/CONTRACTS.md, "Flight outcomes and phases")
 FLIGHT_OK = {"probe": (Outcome.PROBE_STOPPED, Outcome.COMPLETED), "vertical": (Outcome.COMPLETED,),
@@ -107,7 +108,8 @@ def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfi
     aborts = guard_aborts(Path(out.log_dir)) if out.log_dir else 0
     rec = {"log_dir": out.log_dir, "outcome": out.outcome, "abort_reason": out.abort_reason,
            "descent_time_s": out.descent_time_s, "planned_descent_s": out.extra.get("planned_descent_s"),
-           "horizontal_error_m": out.extra.get("horizontal_error_m"), "guard_aborts": aborts}  # fmt: skip
+           "horizontal_error_m": out.extra.get("horizontal_error_m"), "guard_aborts": aborts,
+           **{k: out.extra.get(k) for k in EFFICIENCY_KEYS}}  # fmt: skip
     if out.outcome not in FLIGHT_OK[step]:
         why = out.abort_reason or "no reason given"
         raise StepFailed(f"{step} flight {out.outcome}: {why}" + (f" (log {out.log_dir})" if out.log_dir else ""), rec)
@@ -187,11 +189,13 @@ def run_plan(ctx: StepContext) -> dict[str, Any]:
     out: dict[str, Any] = {"w_allow_mps": profile.w_allow_mps, "w_allow_from": "identified" if found else "prior"}
     for mission in ("vertical", "helix"):
         module = load_mission_module(mission)
-        traj = module.plan(profile, ctx.config(mission))
+        # with the planner's optimum for it, the yardstick of the flight's efficiency (one solve, cached)
+        traj = with_optimum(module.plan(profile, ctx.config(mission)), profile, ctx.print_fn)
         path = ctx.dir.plans / f"{mission}.csv"
         traj.save(path)
         out[mission] = str(path)
         out[f"{mission}_t_f_s"] = traj.duration_s
+        out[f"{mission}_optimum_s"] = (traj.meta.get(OPTIMUM_KEY) or {}).get("optimum_s")
         # the plans for winds the start hover chooses from (flighttest.planner.wind_plans), made now, kept here
         for k, wind_plan in enumerate(_wind_plans(ctx, module, profile, mission)):
             wind_plan.save(ctx.dir.plans / f"{mission}-wind{k + 1}.csv")

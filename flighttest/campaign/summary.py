@@ -18,11 +18,12 @@ import pandas as pd
 from flighttest import __version__
 from flighttest.analysis import legend
 from flighttest.analysis.compare import add_speedup, compare_row
-from flighttest.analysis.descent_time import DescentRule
+from flighttest.analysis.descent_time import HOVER_RULE, DescentRule
 from flighttest.campaign.state import STEPS, CampaignState
 from flighttest.errors import FlighttestError
 from flighttest.flying.log_writer import write_json_atomic
 from flighttest.model.profiles import VehicleProfile
+from flighttest.planner.optimum import EFFICIENCY_KEYS
 
 REPORT_FILES = ("summary.md", "summary.json", "compare.csv", "report.md", "velocity_space.png", "descent_times.png")
 FLIGHTS = ("probe", "vertical", "helix")
@@ -32,6 +33,9 @@ ROWS = (  # the summary table, one column per descent: label, key, format (label
     ("descent time s (first setpoint → settled at the end)", "descent_time_s", "{:.2f}"),
     ("planned descent time s (the plan, same rule)", "planned_descent_s", "{:.2f}"),
     ("speed-up × (vertical / this)", "speedup_vs_vertical", "{:.2f}"),
+    ("hover to hover s (settled at the end point)", "hover_to_hover_s", "{:.2f}"),
+    ("optimum s (the planner's: margin 0, full limits)", "optimum_s", "{:.2f}"),
+    ("flown / optimum × (hover to hover)", "flown_over_optimum", "{:.2f}"),
     ("horizontal error at that instant m", "horizontal_error_m", "{:.2f}"),
     ("start height m (above the ground)", "start_height_m", "{:.2f}"),
     ("height m", "height_m", "{:.2f}"),
@@ -78,6 +82,10 @@ def campaign_summary(state: CampaignState, profile: VehicleProfile, rows: dict[s
         "vertical_descent_s": vert.get("descent_time_s"),
         "helix_descent_s": helix.get("descent_time_s"),
         "speedup_helix_vs_vertical": helix.get("speedup_vs_vertical"),
+        "vertical_hover_to_hover_s": vert.get("hover_to_hover_s"),
+        "helix_hover_to_hover_s": helix.get("hover_to_hover_s"),
+        "vertical_flown_over_optimum": vert.get("flown_over_optimum"),
+        "helix_flown_over_optimum": helix.get("flown_over_optimum"),
         "flights": [rows[s] for s in DESCENTS if s in rows],
         "probe_log": str(probe_log) if probe_log else None,
         "steps_elapsed_s": {s: state.steps[s].elapsed_s for s in STEPS},
@@ -97,7 +105,8 @@ def known_summary(state: CampaignState, profile: VehicleProfile) -> dict[str, An
             rows[step] = {"step": step, "status": state.steps[step].status, "outcome": o.get("outcome"),
                           "guard_aborts": o.get("guard_aborts"), "descent_time_s": o.get("descent_time_s"),
                           "planned_descent_s": o.get("planned_descent_s"),
-                          "horizontal_error_m": o.get("horizontal_error_m"), "log_dir": o.get("log_dir")}  # fmt: skip
+                          "horizontal_error_m": o.get("horizontal_error_m"), "log_dir": o.get("log_dir"),
+                          **{k: o.get(k) for k in EFFICIENCY_KEYS}}  # fmt: skip
     t_v, t_h = (rows.get(d, {}).get("descent_time_s") for d in DESCENTS)
     if isinstance(t_v, int | float) and isinstance(t_h, int | float) and t_h > 0:
         rows["helix"]["speedup_vs_vertical"] = t_v / t_h
@@ -130,6 +139,9 @@ def headlines(s: dict) -> list[str]:
         second = f"{times}, but no speed-up: the helix {helix['descent_differs']} (the vertical baseline's)"
     else:
         second = f"over the same height {times}: {cell(s, 'speedup_helix_vs_vertical', '{:.2f}')}× as fast"
+    if s.get("vertical_flown_over_optimum") is not None or s.get("helix_flown_over_optimum") is not None:
+        second += (f"; hover to hover the helix took {cell(s, 'helix_flown_over_optimum', '{:.2f}')}× its optimum, "
+                   f"the vertical {cell(s, 'vertical_flown_over_optimum', '{:.2f}')}× its own")  # fmt: skip
     return [first, second]
 
 
@@ -153,7 +165,11 @@ def row_legend() -> list[tuple[str, str]]:
     out += [("wind 1 σ m/s", "the uncertainty of that wind"),
             ("wind from", "what flighttest flew with, else the autopilot's estimate, else flighttest's estimate "
              "from the IMU and the drag model (`flighttest.analysis.wind`)"),
-            ("guard aborts", "the live guard's abort orders in the flight (`guard.csv`)")]  # fmt: skip
+            ("guard aborts", "the live guard's abort orders in the flight (`guard.csv`)"),
+            ("hover to hover s", f"from the first setpoint until {HOVER_RULE.describe()}"),
+            ("optimum s", "the planner's fastest descent for this vehicle, height, radius, end point and wind, with "
+             "no guard margin and the vehicle's and its autopilot's full limits, timed by the same rule "
+             "(`flighttest.planner.optimum`)")]  # fmt: skip
     return out
 
 

@@ -518,6 +518,8 @@ COMPARE_COLUMNS = {  # header: (key, format)
     "height m": ("height_m", "{:.2f}"),
     "descent s": ("descent_time_s", "{:.2f}"),  # logs of other programs: duration_s (_compare_cell)
     "planned s": ("planned_descent_s", "{:.2f}"),
+    "hover→hover s": ("hover_to_hover_s", "{:.2f}"),
+    "÷ optimum": ("flown_over_optimum", "{:.2f}"),
     "horiz. err m": ("horizontal_error_m", "{:.2f}"),
     "speed-up ×": ("speedup_vs_first", "{:.2f}"),
     "mean m/s": ("mean_rate_mps", "{:.2f}"),

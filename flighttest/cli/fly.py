@@ -146,6 +146,9 @@ def run_request(req, as_json: bool) -> int:
             off = out.extra.get("horizontal_error_m")
             side = f", {off:.2f} m off sideways" if off is not None else ""
             line += f"  (descent {out.descent_time_s:.2f} s{side})"
+        h2h, ratio = out.extra.get("hover_to_hover_s"), out.extra.get("flown_over_optimum")
+        if h2h is not None:
+            line += f"  hover to hover {h2h:.2f} s" + (f", {ratio:.2f}× the optimum" if ratio is not None else "")
         console.print(line)
         if out.log_dir:
             console.print(f"log: {out.log_dir}")

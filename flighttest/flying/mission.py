@@ -70,6 +70,7 @@ def prepare_flight(
     from flighttest.flying.runner import check_duration
     from flighttest.model.profiles import load_profile
     from flighttest.model.trajectory import Trajectory
+    from flighttest.planner.optimum import with_optimum
 
     # the progress lines and the preflight table (a rich Table: plain print() would show its repr)
     print_fn = print_fn or console.print
@@ -124,6 +125,8 @@ def prepare_flight(
         traj = Trajectory.load(target, profile)
         name, traj_path = Path(target).stem, target
     check_duration(traj, f"trajectory {traj_path}" if traj_path else f"the {name} mission's trajectory")
+    if not dry_run:  # the yardstick of the flight's efficiency, made before arming (a helix: one solve, cached)
+        traj = with_optimum(traj, profile, print_fn)
     wind_plans = []
     if module is not None and hasattr(module, "plans_for_wind") and not dry_run:
         wind_plans = module.plans_for_wind(profile, cfg, print_fn)

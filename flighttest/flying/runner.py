@@ -57,6 +57,7 @@ from flighttest.flying.watch import FlightWatch
 from flighttest.flying.wind import PRIOR_SD_MPS, WindEstimate, WindSources, plan_margin_in_wind, rotate_plan
 from flighttest.inputs import MAX_DURATION_S
 from flighttest.model.trajectory import Trajectory
+from flighttest.planner.optimum import EFFICIENCY_KEYS, efficiency, optimum_for
 
 # re-exported: what callers of the runner have always imported from here
 __all__ = ["LADDER_TIMEOUT_S", "LINK_GIVE_UP_S", "FlightOutcome", "FlyRequest", "MissionRunner", "final_mode", "fly"]
@@ -364,6 +365,8 @@ class MissionRunner:
         extra["horizontal_error_m"] = self.watch.horizontal_error_m
         extra["main_descent"] = main = self._main_descent()
         extra["planned_descent_s"] = main["planned_descent_s"]
+        main.update(self._efficiency(outcome))
+        extra.update({k: main[k] for k in EFFICIENCY_KEYS})
         if self.link is not None:
             extra.update(self.watch.wind().describe())
         if self.ladder.history:
@@ -374,6 +377,17 @@ class MissionRunner:
         if self.preflight is not None:
             extra["preflight"] = self.preflight.to_dict()
         return FlightOutcome(outcome, reason, self.watch.descent_time_s, str(self.log.dir), extra)
+
+    def _efficiency(self, outcome: Outcome) -> dict[str, Any]:
+        """Hover to hover against the planner's optimum for the plan flown (``flighttest.planner.optimum``): held
+        in the plan since the preflight, or solved now for a plan the start hover chose for the wind."""
+        optimum = None
+        if outcome != Outcome.REFUSED and self.t_stream_start is not None:
+            try:
+                optimum = optimum_for(self.traj, self.req.profile, self.req.print_fn)
+            except Exception as exc:  # the flight is flown: no optimum is no reason to lose its summary
+                self.event("optimum_failed", error=repr(exc))
+        return efficiency(self.watch.hover_to_hover_s, optimum.optimum_s if optimum is not None else None)
 
     def _main_descent(self) -> dict[str, Any]:
         """The main descent as the live timer saw it (``flighttest.analysis.descent_time``: what the
@@ -695,6 +709,7 @@ class MissionRunner:
         self.t_stream_start = self.now()
         if self.end_point is not None:
             self.watch.descent_timer = dtime.DescentTimer(self.t_stream_start, self.end_point)
+            self.watch.hover_timer = dtime.DescentTimer(self.t_stream_start, self.end_point, dtime.HOVER_RULE)
         self.event("stream_start", origin_ned=list(start), rows=len(self.traj.df),
                    end_ned=None if self.end_point is None else [float(x) for x in self.end_point])  # fmt: skip
         rate_base, accel_base = self.guard.freeze_baseline()
@@ -711,11 +726,11 @@ class MissionRunner:
             return None
         end_sp = self.streamer.last_planned.hold() if self.streamer.last_planned else hold
         self.set_phase(Phase.SETTLE)
-        # hover on until the descent counts as reached too (its rule is stricter than settling: an
-        # overshoot of the end height settles before it is back within 0.2 m), or the settle times out
-        timer = self.watch.descent_timer
+        # hover on until the descent counts as reached, vertically and hover to hover (their rules are stricter
+        # than settling: an overshoot of the end height settles before it is back within 0.2 m), or time out
+        timers = [t for t in (self.watch.descent_timer, self.watch.hover_timer) if t is not None]
         await self._settle(end_sp, fl.settle_s, fl.settle_s * 3 + 10.0, must_settle=False,
-                           also=lambda: timer is None or timer.result is not None)  # fmt: skip
+                           also=lambda: all(t.result is not None for t in timers))  # fmt: skip
         if self.ladder.active:
             return None
         self.floor_active = False

@@ -64,6 +64,7 @@ class FlightWatch:
         self.mode_while_armed: str | None = None  # the flight mode last reported while armed
         self._t_mode_change = -math.inf
         self.descent_timer: dtime.DescentTimer | None = None  # set when the descent starts
+        self.hover_timer: dtime.DescentTimer | None = None  # the same, hover to hover (dtime.HOVER_RULE)
         self.descent_time_s: float | None = None
         self.horizontal_error_m: float | None = None  # off the end point sideways when the descent was reached
 
@@ -109,13 +110,27 @@ class FlightWatch:
             host.abort(d.reason, gd.stale_rung(host.phase) if d.verdict == gd.STALE else gd.Rung.RECOVER, d.verdict)
         if st.armed and t - self._t_mode_change >= MODE_SETTLE_S:
             self.mode_while_armed = st.flight_mode
+        if host.phase not in dtime.DESCENT_PHASES or host.ladder.active:
+            return
         timer = self.descent_timer
-        if timer is not None and timer.result is None and host.phase in dtime.DESCENT_PHASES and not host.ladder.active:
+        if timer is not None and timer.result is None:
             r = timer.update(t, st.n_m, st.e_m, st.d_m, st.vd_mps)
             if r is not None:
                 self.descent_time_s, self.horizontal_error_m = r.descent_time_s, r.horizontal_error_m
                 host.event("descent_reached", **r.fields(), reached_t_s=round(r.t_s - host.log.t0_mono, 3),
                            rule=timer.rule.describe())  # fmt: skip
+        hover = self.hover_timer
+        if hover is not None and hover.result is None:
+            r = hover.update(t, st.n_m, st.e_m, st.d_m, st.vd_mps, st.vn_mps, st.ve_mps)
+            if r is not None:
+                host.event("hover_reached", hover_to_hover_s=round(r.descent_time_s, 3),
+                           horizontal_error_m=round(r.horizontal_error_m, 3),
+                           reached_t_s=round(r.t_s - host.log.t0_mono, 3), rule=hover.rule.describe())  # fmt: skip
+
+    @property
+    def hover_to_hover_s(self) -> float | None:
+        r = self.hover_timer.result if self.hover_timer is not None else None
+        return r.descent_time_s if r is not None else None
 
     def on_imu(self, t: float) -> None:
         host = self.host

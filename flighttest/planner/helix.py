@@ -49,7 +49,7 @@ from flighttest.errors import FlighttestError
 from flighttest.model.aero import G_MPS2
 from flighttest.model.frames import quat_from_euler, quat_multiply, quat_to_rotmat, worst_blade_velocity_mps
 from flighttest.model.profiles import VehicleProfile
-from flighttest.planner.autopilot_limits import capped, plan_limits
+from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION, capped, plan_limits
 from flighttest.planner.cone import VelocityConstraint, ppos
 from flighttest.planner.multistart import attempt_record, multistart_refined, refine
 from flighttest.planner.ocp import (
@@ -164,6 +164,7 @@ def problem_for_vehicle(
     extra_margin_mps: float = 0.0,
     tilt_margin_deg: float = 0.0,
     rate_margin_dps: float = 0.0,
+    limit_fraction: float = AUTOPILOT_LIMIT_FRACTION,
 ) -> HelixProblem:
     """Bounds from a vehicle profile; thrust ≥ the rotors' minimum (never reversed). Where the
     profile names its autopilot's setpoint-shaping limits (``[autopilot]``), the descent and climb
@@ -173,7 +174,7 @@ def problem_for_vehicle(
     the constraint's margin (the plan keeps that much further inside the guard/cone bound than the
     guard itself), ``tilt_margin_deg`` and ``rate_margin_dps`` derate the tilt and body-rate limits
     (after ``tilt_max_deg`` / ``rate_max_dps`` and the profile's own limits are applied), leaving
-    the attitude controller room to track.
+    the attitude controller room to track. ``limit_fraction`` of the autopilot's limits are planned for.
     """
     if not 0 < thrust_fraction <= 1:
         raise FlighttestError(f"thrust fraction must lie in (0, 1] (got {thrust_fraction})")
@@ -197,7 +198,7 @@ def problem_for_vehicle(
     if rate_max_dps is not None:
         rates = tuple(min(r, math.radians(rate_max_dps)) for r in rates)
     rates = tuple(r - math.radians(rate_margin_dps) for r in rates)
-    limits = plan_limits(profile)
+    limits = plan_limits(profile, limit_fraction)
     if limits.jerk_h_max_mps3 is not None:
         # the autopilot ramps horizontal acceleration at its jerk limit, and a_h ≈ g tan θ: a tilt rate above
         # jerk / g arrives late, then overshoots (ArduCopter SITL's helix, bench/RESULTS.md)

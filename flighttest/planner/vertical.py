@@ -27,7 +27,7 @@ from flighttest.errors import FlighttestError
 from flighttest.inputs import MAX_DURATION_S
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import sample_times
-from flighttest.planner.autopilot_limits import capped, plan_limits
+from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION, capped, plan_limits
 
 
 @dataclass(frozen=True)
@@ -45,16 +45,17 @@ class VerticalPlan:
 
 def plan_vertical(profile: VehicleProfile, height_m: float = 5.0, w_allow_mps: float | None = None,
                   margin_mps: float | None = None, accel_fraction: float = 0.8, wind_d_mps: float = 0.0,
-                  rate_hz: float = 100.0) -> VerticalPlan:  # fmt: skip
-    """Closed-form profile sampled at ``rate_hz`` (plus the exact switching times), within the
-    autopilot's limits when the profile names them (``autopilot_limits.plan_limits``)."""
+                  rate_hz: float = 100.0,
+                  limit_fraction: float = AUTOPILOT_LIMIT_FRACTION) -> VerticalPlan:  # fmt: skip
+    """Closed-form profile sampled at ``rate_hz`` (plus the exact switching times), within
+    ``limit_fraction`` of the autopilot's limits when the profile names them (``autopilot_limits.plan_limits``)."""
     if not (math.isfinite(height_m) and height_m > 0):
         raise FlighttestError(f"vertical plan: height must be a positive number (got {height_m!r})")
     if not 0 < accel_fraction <= 1:
         raise FlighttestError(f"vertical plan: accel fraction must lie in (0, 1] (got {accel_fraction})")
     w_allow = profile.w_allow_mps if w_allow_mps is None else w_allow_mps
     margin = profile.vrs.margin_mps if margin_mps is None else margin_mps
-    limits = plan_limits(profile)
+    limits = plan_limits(profile, limit_fraction)
     cruise = w_allow - margin + wind_d_mps
     cruise = capped(min(cruise, profile.max_speed_mps), limits.descent_max_mps)
     if not cruise > 0:

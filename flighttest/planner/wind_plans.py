@@ -52,7 +52,7 @@ def _key(profile: VehicleProfile, plan: dict[str, Any], speed_mps: float, radius
 
 
 @contextlib.contextmanager
-def _planning(base: Path) -> Iterator[None]:
+def planning_lock(base: Path) -> Iterator[None]:
     """One process plans a key at a time: a second flighttest (a campaign's next step, another test) waits for
     the first's plan and loads it instead of spending the same minute of IPOPT beside it."""
     try:
@@ -84,7 +84,7 @@ def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_
     for s in speeds_mps:
         base = root / f"helix-{profile.name}-{_key(profile, plan, s, radius_mps)}"
         failed = base.parent / f"{base.name}.failed"
-        with _planning(base):
+        with planning_lock(base):
             try:
                 out.append(Trajectory.load(base, profile))
                 continue
