@@ -28,7 +28,7 @@ every command that reports numbers takes --json; bad input exits with code 2 and
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from flighttest.cli import analysis, campaign, fly, plan, region, sim, vehicle
+    from flighttest.cli import analysis, campaign, fly, params, plan, region, sim, vehicle
     from flighttest.inputs import ArgumentParser
 
     # flighttest.inputs.ArgumentParser (one-line errors, negative numbers in any notation); the
@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"flighttest {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in (campaign, vehicle, region, plan, sim, fly, analysis):
+    for module in (campaign, vehicle, region, plan, sim, fly, params, analysis):
         module.register(sub)
     return parser
 

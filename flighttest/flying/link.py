@@ -724,6 +724,11 @@ class VehicleLink:
         except Exception:
             return None
 
+    async def set_param(self, name: str, value: float | int, timeout_s: float = 5.0) -> None:
+        """PARAM_SET through MAVSDK, as an integer parameter for an ``int`` value; raises on no acknowledgement."""
+        setter = self.param.set_param_int if isinstance(value, int) else self.param.set_param_float
+        await self.call(setter(name, value), f"set param {name}", timeout_s)
+
     async def get_all_params(self, timeout_s: float = 3.0) -> dict[str, float | int]:
         """Every parameter of the vehicle (MAVLink PARAM_REQUEST_LIST through MAVSDK), name → value.
 
