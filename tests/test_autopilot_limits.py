@@ -318,3 +318,18 @@ def test_the_autopilots_jerk_bounds_the_helix_tilt_rate_and_thrust_rate(ac, x500
     assert p.thrust_rate_max_mps3 == pytest.approx(FRACTION * ARDUCOPTER["PSC_JERK_D"])
     q = helix.problem_for_vehicle(x500)
     assert q.thrust_rate_max_mps3 is None and q.rate_max_rps[0] == pytest.approx(math.radians(x500.max_rate_dps[0]))
+
+
+def test_the_vehicles_own_limits_replace_the_profiles_only_where_they_differ():
+    # issue 22: the preflight plans within what the vehicle holds (flighttest.flying.live_limits)
+    from flighttest.flying.live_limits import ardupilot_limits, with_live_limits
+
+    prof = load_profile("arducopter_sitl")
+    assert with_live_limits(prof, ardupilot_limits(ARDUCOPTER)) == (prof, [])  # the defaults: nothing to plan again
+    raised, diffs = with_live_limits(prof, ardupilot_limits({**ARDUCOPTER, "WP_ACC_Z": 2.0}))
+    assert raised.autopilot.accel_z_max_mps2 == 2.0 and diffs == ["WP_ACC_Z 2 (the profile's 1)"]
+    assert raised.autopilot.accel_h_max_mps2 == prof.autopilot.accel_h_max_mps2
+    # older firmware: cm/s², cm/s; a limit reported as 0 (off) is not a limit of 0
+    old = ardupilot_limits({"WPNAV_ACCEL_Z": 150, "WPNAV_SPEED_DN": 120.0, "PSC_JERK_Z": 0.0})
+    assert old["accel_z_max_mps2"].value == 1.5 and old["descent_max_mps"].value == pytest.approx(1.2)
+    assert "jerk_z_max_mps3" not in old and old["accel_z_max_mps2"].describe() == "WPNAV_ACCEL_Z 150 (1.5 m/s²)"

@@ -80,7 +80,9 @@ def test_a_damaged_file_is_one_line_naming_where(tmp_path, line, message):
 
 def test_what_a_file_would_change_is_refused_whole_for_a_name_the_vehicle_lacks():
     now = {"WP_ACC_Z": 1.0, "FS_GCS_ENABLE": 0, "WP_ACC": 2.5}
-    todo = changes(now, {"WP_ACC_Z": 2.0, "FS_GCS_ENABLE": 1, "WP_ACC": 2.5000000001})
+    todo, own = changes({**now, "STAT_RUNTIME": 61}, {"WP_ACC_Z": 2.0, "FS_GCS_ENABLE": 1, "WP_ACC": 2.5000000001,
+                                                      "STAT_RUNTIME": 0})  # fmt: skip
+    assert own == ["STAT_RUNTIME"]  # the autopilot keeps it itself: a saved file does not turn it back
     assert [(c.name, c.now, c.new) for c in todo] == [("WP_ACC_Z", 1.0, 2.0), ("FS_GCS_ENABLE", 0, 1)]
     with pytest.raises(FlighttestError, match="no parameter WPNAV_ACCEL_Z: nothing applied"):
         changes(now, {"WP_ACC_Z": 2.0, "WPNAV_ACCEL_Z": 200})

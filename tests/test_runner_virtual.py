@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 import pytest
 
 from flighttest.flying import guard as gd
@@ -265,6 +266,44 @@ def test_ardupilot_defaults_are_refused_before_arming_with_the_value_to_set(tmp_
     assert checks["FS_GCS_ENABLE"]["status"] == "warn" and checks["MAV_GCS_SYSID"]["status"] == "warn"
     assert "set MAV_GCS_SYSID to 245" in checks["MAV_GCS_SYSID"]["requirement"]
     assert "COM_OF_LOSS_T" not in checks  # PX4's table is not asked of ArduPilot
+
+
+def test_older_ardupilot_names_are_refused_with_the_value_to_set_in_their_own_unit(tmp_path):
+    params = {k: v for k, v in AP_DEFAULTS.items() if k not in ("WP_ACC_Z", "WP_SPD_DN")}
+    f = fly(tmp_path, autopilot=ARDUPILOT, params={**params, "WPNAV_ACCEL_Z": 100.0, "WPNAV_SPEED_DN": 150.0})
+    assert f.outcome.outcome == "refused"  # a trajectory file (no replan): judged as it is
+    assert f.outcome.abort_reason.startswith("preflight failed: WPNAV_ACCEL_Z: 1 m/s²")
+    assert "set WPNAV_ACCEL_Z to 150" in f.outcome.abort_reason  # cm/s², as that firmware holds it
+    checks = {c["name"]: c for c in f.summary["preflight"]["checks"]}
+    assert checks["WPNAV_SPEED_DN"]["status"] == "pass" and checks["WPNAV_SPEED_DN"]["value"] == "1.5 m/s"
+
+
+def _replan(cfg):
+    return lambda profile: (load_mission_module("vertical").plan(profile, cfg), [])
+
+
+@pytest.mark.parametrize("names", ["newer", "older"])
+def test_ardupilot_limits_read_at_the_preflight_are_planned_within(tmp_path, names):
+    # issue 22: the plan made within the vehicle's own GUIDED limits, not a profile's copy (x500 has none): the
+    # vertical's 1.47 m/s² within 90 % of WP_ACC_Z 1, where the profile's plan was refused. Older firmware
+    # names it WPNAV_ACCEL_Z, in cm/s² (ArduCopter SITL 90700977)
+    params = dict(AP_DEFAULTS)
+    if names == "older":
+        for new, old in (("WP_ACC_Z", "WPNAV_ACCEL_Z"), ("WP_ACC", "WPNAV_ACCEL"), ("WP_SPD_DN", "WPNAV_SPEED_DN"),
+                         ("WP_SPD_UP", "WPNAV_SPEED_UP")):  # fmt: skip
+            params[old] = 100.0 * params.pop(new)
+        params["PSC_JERK_Z"] = params.pop("PSC_JERK_D")
+    f = fly(tmp_path, autopilot=ARDUPILOT, params=params, request={"replan": _replan(config())})
+    assert f.outcome.outcome == "completed", f.outcome.abort_reason
+    name = "WP_ACC_Z" if names == "newer" else "WPNAV_ACCEL_Z"
+    live = next(e for e in f.events if e["event"] == "live_limits")["changed"]
+    assert any(x.startswith(f"{name} {1 if names == 'newer' else 100} ") for x in live), live
+    flown = pd.read_csv(Path(f.outcome.log_dir) / "trajectory.csv")
+    assert flown["ad_mps2"].abs().max() <= 0.9 * 1.0 + 1e-6  # what the vehicle was told: within its 90 %
+    assert f.runner.traj.duration_s > load_mission_module("vertical").plan(X500, config()).duration_s
+    checks = {c["name"]: c for c in f.summary["preflight"]["checks"]}
+    assert checks[name]["status"] == "pass" and checks[name]["value"] == "1 m/s²"
+    assert "rides it" in checks[name]["requirement"]  # the limit bounds the plan: raising it would pay
 
 
 def test_ardupilot_flies_the_descent_in_guided_and_lands(tmp_path):

@@ -95,13 +95,13 @@ def write_configs(d: CampaignDir) -> None:
 
 
 def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfig, traj: Trajectory,
-         traj_path: str = "", wind_plans: list[Trajectory] | None = None) -> dict[str, Any]:  # fmt: skip
+         traj_path: str = "", wind_plans: list[Trajectory] | None = None, replan=None) -> dict[str, Any]:  # fmt: skip
     from flighttest.flying.runner import FlyRequest, fly
 
     req = FlyRequest(
         connect=ctx.connect(), profile=profile, config=cfg, trajectory=traj, mission_name=step,
         trajectory_path=traj_path, yes=ctx.yes, log_root=ctx.dir.flights, show_panel=ctx.show_panel,
-        confirm=ctx.confirm, print_fn=ctx.print_fn, wind_plans=wind_plans or [],
+        confirm=ctx.confirm, print_fn=ctx.print_fn, wind_plans=wind_plans or [], replan=replan,
     )  # fmt: skip
     out = asyncio.run(fly(req))
     # log_dir is None when nothing answered (the flight left no folder)
@@ -213,7 +213,13 @@ def run_descent(ctx: StepContext, mission: str) -> dict[str, Any]:
     path = ctx.state.path("plan", mission)
     traj = Trajectory.load(path, profile)
     wind_plans = [Trajectory.load(p, profile) for p in sorted(ctx.dir.plans.glob(f"{mission}-wind*.csv"))]
-    return _fly(ctx, mission, profile, ctx.config(mission), traj, str(path), wind_plans)
+    module = load_mission_module(mission)
+
+    def replan(p: VehicleProfile) -> tuple[Trajectory, list[Trajectory]]:
+        """The plan step's work again for ``p``, the vehicle's own limits (read at the flight's preflight)."""
+        return with_optimum(module.plan(p, ctx.config(mission)), p, ctx.print_fn), _wind_plans(ctx, module, p, mission)
+
+    return _fly(ctx, mission, profile, ctx.config(mission), traj, str(path), wind_plans, replan)
 
 
 def run_report(ctx: StepContext) -> dict[str, Any]:

@@ -108,9 +108,12 @@ def cmd_apply(args: argparse.Namespace) -> int:
     if not args.yes and not sys.stdin.isatty():
         raise FlighttestError("no terminal to ask: pass --yes to apply the changes without the question")
 
-    def show(todo) -> None:
+    def show(todo, own) -> None:
         if args.json:
             return
+        if own:
+            names = ", ".join(own[:6]) + (f" and {len(own) - 6} more" if len(own) > 6 else "")
+            console.print(f"left alone: {len(own)} the autopilot keeps itself ({names})", markup=False)
         if not todo:
             console.print(f"{args.file}: the vehicle holds every value already; nothing to change", markup=False)
         else:

@@ -68,7 +68,7 @@ def prepare_flight(
     from flighttest.console import console
     from flighttest.flying.link import check_connection, check_url
     from flighttest.flying.runner import check_duration
-    from flighttest.model.profiles import load_profile
+    from flighttest.model.profiles import VehicleProfile, load_profile
     from flighttest.model.trajectory import Trajectory
     from flighttest.planner.optimum import with_optimum
 
@@ -130,13 +130,23 @@ def prepare_flight(
     wind_plans = []
     if module is not None and hasattr(module, "plans_for_wind") and not dry_run:
         wind_plans = module.plans_for_wind(profile, cfg, print_fn)
+    replan = None
+    if module is not None:
+        plan_module = module
+
+        def replan(p: VehicleProfile) -> tuple[Trajectory, list[Trajectory]]:
+            """The mission planned again for ``p`` (the vehicle's own limits, read at the preflight)."""
+            again = with_optimum(plan_module.plan(p, cfg), p, print_fn)
+            has_wind = hasattr(plan_module, "plans_for_wind") and not dry_run
+            return again, plan_module.plans_for_wind(p, cfg, print_fn) if has_wind else []
+
     check_connection(connect)  # last: it may wait a moment for a host name to resolve
     return FlyRequest(
         connect=connect, profile=profile, config=cfg, trajectory=traj, mission_name=name,
         trajectory_path=traj_path, sysid=sysid, yes=yes, dry_run=dry_run,
         wind_ned_mps=tuple(float(x) for x in wind_ned_mps) if wind_ned_mps is not None else None,
         wind_sd_mps=wind_sd_mps, log_root=root, show_panel=show_panel, confirm=confirm, print_fn=print_fn,
-        wind_plans=wind_plans,
+        wind_plans=wind_plans, replan=replan,
     )  # fmt: skip
 
 

@@ -77,6 +77,9 @@ class FlyRequest:
     # plans made ahead for winds (flighttest.planner.wind_plans): the start hover flies the fastest that the
     # wind measured there leaves clear of the guard region, the trajectory above among them
     wind_plans: list[Trajectory] = field(default_factory=list)
+    # the mission planned again for a profile (with the vehicle's own limits, read at the preflight): the plan
+    # and its plans for winds; None: a trajectory file, flown as it is
+    replan: Callable[[VehicleProfile], tuple[Trajectory, list[Trajectory]]] | None = None
 
 
 @dataclass

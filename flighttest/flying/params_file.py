@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from fnmatch import fnmatchcase
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,11 @@ MAV_PARAM_TYPE_REAL32 = 9
 INT_TYPES = frozenset(range(1, 9))  # UINT8 … INT64
 MAX_FILE_BYTES = 4 * 1024 * 1024  # ArduCopter's full set is about 60 kB
 MAX_NAME_CHARS = 16  # MAVLink's param_id
+# values the autopilot keeps itself (statistics, the ground pressure of this boot, the mission's size, device
+# ids, the flight time): a saved file's old values are left alone. ArduCopter SITL refused BARO1_GND_PRESS
+# and MIS_TOTAL from a save of minutes before (bench/RESULTS.md, "Parameter files on real firmware").
+AUTOPILOT_OWN = ("STAT_*", "BARO*_GND_PRESS", "MIS_TOTAL", "COMPASS_DEC", "FORMAT_VERSION", "SYSID_SW_*",
+                 "*_DEVID*", "*_DEV_ID*", "LND_FLIGHT_T_*", "COM_FLIGHT_UUID")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -110,19 +116,25 @@ def read_params(path: Path | str) -> dict[str, float | int]:
     return out
 
 
-def changes(now: dict[str, float | int], wanted: dict[str, float | int]) -> list[ParamChange]:
-    """What setting ``wanted`` on a vehicle holding ``now`` would change, in the file's order. Refuses (naming
-    them) names the vehicle does not have and fractions for its integer parameters: nothing is half applied."""
+def autopilot_own(name: str) -> bool:
+    """A parameter the autopilot keeps itself (``AUTOPILOT_OWN``)."""
+    return any(fnmatchcase(name, pattern) for pattern in AUTOPILOT_OWN)
+
+
+def changes(now: dict[str, float | int], wanted: dict[str, float | int]) -> tuple[list[ParamChange], list[str]]:
+    """What setting ``wanted`` on a vehicle holding ``now`` would change, in the file's order, and the names
+    that differ but the autopilot keeps itself (left alone: ``AUTOPILOT_OWN``). Refuses (naming them) names the
+    vehicle does not have and fractions for its integer parameters: nothing is half applied."""
     unknown = [n for n in wanted if n not in now]
     if unknown:
         more = f" and {len(unknown) - 8} more" if len(unknown) > 8 else ""
         raise FlighttestError(f"the vehicle has no parameter {', '.join(unknown[:8])}{more}: nothing applied")
-    out = []
+    out, own = [], []
     for name, new in wanted.items():
         cur = now[name]
         if isinstance(cur, int) and not float(new).is_integer():
             raise FlighttestError(f"{name} is an integer parameter on the vehicle, not {new!r}: nothing applied")
         value: float | int = int(new) if isinstance(cur, int) else float(new)
         if not same_value(cur, value):
-            out.append(ParamChange(name, cur, value))
-    return out
+            (own.append(name) if autopilot_own(name) else out.append(ParamChange(name, cur, value)))
+    return out, own

@@ -6,7 +6,7 @@ stops the mission before arming, ``warn`` is shown at the go/no-go prompt.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from rich.table import Table
@@ -15,10 +15,12 @@ from flighttest.errors import FlighttestError
 from flighttest.flying.autopilot import AutopilotRules
 from flighttest.flying.guard import predicted_blade_velocity_mps
 from flighttest.flying.link import TelemetryState
+from flighttest.flying.live_limits import param_value
 from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M
 from flighttest.model.frames import GuardRegion
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import LIMIT_REL_TOL, Trajectory
+from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION
 
 PASS, WARN, FAIL = "pass", "warn", "fail"
 
@@ -367,18 +369,20 @@ ARDUPILOT_PARAMS = {"GUID_TIMEOUT": "float", "FS_GCS_ENABLE": "int", "FS_GCS_TIM
 # FS_GCS_ENABLE values (ArduCopter): what the vehicle does when the ground station's heartbeats stop
 GCS_FS_ACTIONS = {0: "off", 1: "RTL", 2: "continue the mission in AUTO, else RTL", 3: "SmartRTL or RTL",
                   4: "SmartRTL or Land", 5: "Land", 6: "Auto DO_LAND_START or RTL", 7: "Brake or Land"}  # fmt: skip
+RIDES_LIMIT = 0.97  # a plan using this much of a limit's share is bounded by it
 JERK_RAMP_MAX_S = 0.5  # an acceleration step smoothed over longer than this lags the plan noticeably
 GUIDED_SHAPING = "GUIDED shapes the setpoints with it: the vehicle falls behind, then overshoots into the guard"
 
 
-def _need(name: str, value: float | int | None, need: float, unit: str, why: str) -> Check:
-    """``value`` ≥ ``need``, else a failure that names the value to set."""
+def _need(name: str, value: float | int | None, need: float, unit: str, why: str, scale: float = 1.0) -> Check:
+    """``value`` ≥ ``need`` (both SI), else a failure that names the value to set (in the parameter's own unit:
+    ``scale`` of it is one SI unit's, 0.01 for older ArduCopter's cm)."""
     if value is None:
         return Check(name, WARN, "not reported", f"≥ {need:.2f} {unit} ({why})")
     ok = float(value) + 1e-6 >= need
+    to_set = f"{math.ceil(need * 10) / 10 / scale:g}"
     return Check(name, PASS if ok else FAIL, f"{float(value):g} {unit}",
-                 f"≥ {need:.2f} {unit}" + ("" if ok else f": set {name} to {math.ceil(need * 10) / 10:g}")
-                 + f" ({why})")  # fmt: skip
+                 f"≥ {need:.2f} {unit}" + ("" if ok else f": set {name} to {to_set}") + f" ({why})")  # fmt: skip
 
 
 def ardupilot_param_checks(params: dict[str, float | int | None], stats: TrajectoryStats, w_allow_mps: float,
@@ -412,20 +416,27 @@ def ardupilot_param_checks(params: dict[str, float | int | None], stats: Traject
         if not match:
             need += f"; set MAV_GCS_SYSID to {gcs_sysid} to have it watch flighttest"
         out.append(Check("MAV_GCS_SYSID", PASS if match else FAIL if fs_on else WARN, f"{int(sysid)}", need))
-    out.append(_need("WP_SPD_DN", params.get("WP_SPD_DN"), stats.descent_max_mps, "m/s",
-                     "GUIDED clips descents to it"))  # fmt: skip
-    out.append(_need("WP_SPD_UP", params.get("WP_SPD_UP"), max(stats.climb_max_mps, recovery_climb_mps), "m/s",
-                     "GUIDED clips climbs to it; the recovery climbs"))  # fmt: skip
-    out.append(_need("WP_ACC_Z", params.get("WP_ACC_Z"), stats.accel_z_max_mps2, "m/s²",
-                     f"the plan's vertical acceleration; {GUIDED_SHAPING}"))  # fmt: skip
-    out.append(_need("WP_ACC", params.get("WP_ACC"), stats.accel_h_max_mps2, "m/s²",
-                     f"the plan's horizontal acceleration; {GUIDED_SHAPING}"))  # fmt: skip
-    jerk_d = params.get("PSC_JERK_D")
+    # the GUIDED limits in whichever names the firmware has (older ones in cm: flighttest.flying.live_limits)
+    for new, need, unit, why in (
+        ("WP_SPD_DN", stats.descent_max_mps, "m/s", "GUIDED clips descents to it"),
+        ("WP_SPD_UP", max(stats.climb_max_mps, recovery_climb_mps), "m/s",
+         "GUIDED clips climbs to it; the recovery climbs"),
+        ("WP_ACC_Z", stats.accel_z_max_mps2, "m/s²", f"the plan's vertical acceleration; {GUIDED_SHAPING}"),
+        ("WP_ACC", stats.accel_h_max_mps2, "m/s²", f"the plan's horizontal acceleration; {GUIDED_SHAPING}"),
+    ):  # fmt: skip
+        name, value, scale = param_value(params, new)
+        check = _need(name, value, need, unit, why, scale)
+        if check.status == PASS and value and need >= RIDES_LIMIT * AUTOPILOT_LIMIT_FRACTION * value:
+            # the plans keep AUTOPILOT_LIMIT_FRACTION of each limit: this one bounds the plan
+            check = replace(check, requirement=f"{check.requirement}; the plan rides it: a higher {name} lets the "
+                                                "plan go faster")  # fmt: skip
+        out.append(check)
+    jerk_name, jerk_d, _ = param_value(params, "PSC_JERK_D")
     if jerk_d is not None and float(jerk_d) > 0:
         # the position controller ramps each acceleration step at this jerk: a plan whose steps it smooths
         # over more than a few telemetry periods arrives late (a step plan, the vertical's, has no finite jerk)
         ramp_s = stats.accel_z_max_mps2 / float(jerk_d)
-        out.append(Check("PSC_JERK_D", PASS if ramp_s <= JERK_RAMP_MAX_S else WARN, f"{float(jerk_d):g} m/s³",
+        out.append(Check(jerk_name, PASS if ramp_s <= JERK_RAMP_MAX_S else WARN, f"{float(jerk_d):g} m/s³",
                          f"ramps the plan's {stats.accel_z_max_mps2:.2f} m/s² in ≤ {JERK_RAMP_MAX_S:g} s "
                          f"(takes {ramp_s:.2f} s)"))  # fmt: skip
     jerk = params.get("WP_JERK")

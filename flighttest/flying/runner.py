@@ -34,6 +34,7 @@ from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopil
 from flighttest.flying.ground import GroundEvidence
 from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, LadderExecutor
 from flighttest.flying.link import GCS_SYSID, Link, VehicleLink
+from flighttest.flying.live_limits import ARDUPILOT_LIMITS, LiveLimit, ardupilot_limits, with_live_limits
 from flighttest.flying.log_writer import FlightLogWriter
 from flighttest.flying.outcome import FlightOutcome, FlyRequest, Outcome, Phase, final_mode
 from flighttest.flying.pauses import FlightPauses
@@ -580,12 +581,8 @@ class MissionRunner:
         # on, a pilot's mode means a takeover (flighttest.flying.watch), so the flight starts from another
         await self._leave_mode(rules.pilot_modes, "is a pilot's mode")
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
-        params = {}
-        wanted = ARDUPILOT_PARAMS if rules.name == ARDUPILOT else ABORT_PARAMS
-        for name, kind in wanted.items():
-            params[name] = await link.get_param(name, kind)
-        # the parameter snapshot of this flight (params.json): everything relevant, read once and
-        # bounded (a slow link must not hold the flight up); else the values just read, noted
+        # every parameter, read once and bounded (a slow link must not hold the flight up): the checks take
+        # theirs from it; without it each is asked for alone (a name the firmware lacks waits out a timeout)
         from flighttest.analysis.params import snapshot
 
         all_params, note = None, None
@@ -594,6 +591,15 @@ class MissionRunner:
             note = None if all_params else "the vehicle sent no parameters; kept the preflight check's"
         except Exception as exc:
             note = f"reading all parameters failed ({exc}); kept the preflight check's"
+        params: dict[str, Any] = {}
+        wanted = ARDUPILOT_PARAMS if rules.name == ARDUPILOT else ABORT_PARAMS
+        for name, kind in wanted.items():
+            params[name] = all_params.get(name) if all_params else await link.get_param(name, kind)
+        if rules.name == ARDUPILOT and all_params:  # older firmware's names of the GUIDED limits too
+            params.update({n: all_params[n] for names in ARDUPILOT_LIMITS.values() for n, _ in names
+                           if n in all_params})  # fmt: skip
+            await self._plan_within(ardupilot_limits(params))
+        # the parameter snapshot of this flight (params.json): everything relevant; else the values just read
         snap = snapshot(all_params, params, await link.autopilot_name(), time.time(), note)
         try:
             self.log.write_params(snap)
@@ -627,6 +633,30 @@ class MissionRunner:
             raise _Refused(f"cannot write the flight log in {self.log.dir} ({exc.strerror or exc})") from None
         self.event("preflight", ok=pre.ok, failures=[c.name for c in pre.failures])
         return pre
+
+    async def _plan_within(self, live: dict[str, LiveLimit]) -> None:
+        """Plan the mission again within the vehicle's own GUIDED limits where they differ from the profile's
+        (``flighttest.flying.live_limits``): a limit raised for the test day lets the plan go faster, one
+        lowered keeps it flyable. A trajectory file is flown as it is (the preflight judges it)."""
+        req = self.req
+        profile, diffs = with_live_limits(req.profile, live)
+        if not diffs or req.replan is None:
+            return
+        self.event("live_limits", changed=diffs)
+        self.progress(f"the vehicle's own limits differ from the profile's: {'; '.join(diffs)}: planning within them")
+        try:
+            traj, wind_plans = await asyncio.to_thread(req.replan, profile)
+        except FlighttestError as exc:
+            raise _Refused(f"no plan within the vehicle's own limits ({'; '.join(diffs)}): {exc}") from None
+        check_duration(traj)
+        req.profile, req.trajectory, req.wind_plans = profile, traj, wind_plans
+        self.traj = self.stream_traj = traj.resample(self.fl.rate_hz)
+        try:
+            self.log.save_trajectory(traj)
+        except OSError as exc:
+            raise _Refused(f"cannot write the flight log in {self.log.dir} ({exc.strerror or exc})") from None
+        self.event("replanned", t_f_s=round(traj.duration_s, 3), wind_plans=len(wind_plans),
+                   autopilot=profile.autopilot.summary() if profile.autopilot else None)  # fmt: skip
 
     # -- nominal flow ------------------------------------------------------------------------------
     async def _nominal(self) -> FlightOutcome | None:

@@ -36,6 +36,7 @@ class ParamsResult:
     changes: list[dict[str, Any]] = field(default_factory=list)
     applied: list[str] = field(default_factory=list)
     failed: list[dict[str, Any]] = field(default_factory=list)
+    left_alone: list[str] = field(default_factory=list)  # differ, but the autopilot keeps them itself
     backup: str | None = None
     declined: bool = False
 
@@ -86,20 +87,20 @@ async def _refuse_if_armed(link) -> None:
 
 async def apply(connect: str, path: Path | str, *, action: str = "apply", backup: Path | str | None = None,
                 confirm: Callable[[list[ParamChange]], bool] | None = None, sysid: int | None = None,
-                show: Callable[[list[ParamChange]], None] = lambda _: None) -> ParamsResult:  # fmt: skip
+                show: Callable[[list[ParamChange], list[str]], None] = lambda *_: None) -> ParamsResult:  # fmt: skip
     """Set the parameters of the file ``path`` that differ on the vehicle (``action`` "apply" or "restore").
-    ``show`` gets the changes, ``confirm`` decides (None: go); before setting anything the vehicle's values of
-    the parameters about to change go to ``backup`` (None: no backup). Each value is read back; one the
-    vehicle did not take is in ``failed``."""
+    ``show`` gets the changes and the names left alone (``params_file.AUTOPILOT_OWN``), ``confirm`` decides
+    (None: go); before setting anything the vehicle's values of the parameters about to change go to
+    ``backup`` (None: no backup). Each value is read back; one the vehicle did not take is in ``failed``."""
     wanted = read_params(path)  # a bad file is refused before anything connects
     link = await _open(connect, sysid)
     try:
         await _refuse_if_armed(link)
         now = await _read_all(link)
-        todo = changes(now, wanted)
+        todo, own = changes(now, wanted)
         res = ParamsResult(action, str(path), link.target_sysid, await link.autopilot_name(), len(wanted),
-                           [c.record() for c in todo])  # fmt: skip
-        show(todo)
+                           [c.record() for c in todo], left_alone=own)  # fmt: skip
+        show(todo, own)
         if not todo:
             return res
         if confirm is not None and not confirm(todo):
