@@ -86,6 +86,24 @@ def _healthy_state() -> TelemetryState:
     return st
 
 
+def _recount(st, stream: str, rate_hz: float, last_s: float = 101.0) -> None:
+    """The stream's arrivals replaced by ``rate_hz`` from 98 s until ``last_s``."""
+    for d in (st.counts, st.first_t, st.recent):
+        d.pop(stream, None)
+    for t in np.arange(98.0, last_s + 1e-9, 1.0 / rate_hz):
+        st.count(stream, float(t))
+
+
+def test_a_streams_rate_is_its_last_seconds():
+    # ArduCopter SITL sent 39 Hz on average from the connection, 50 Hz once it took the rate asked of it
+    st = _healthy_state()
+    _recount(st, "posvel", 5.0, last_s=100.0)
+    for t in np.arange(100.02, 101.0 + 1e-9, 0.02):
+        st.count("posvel", float(t))
+    assert st.rate_hz("posvel", 101.0) == pytest.approx(50.0, abs=1.0)
+    assert st.rate_hz("posvel", 103.0) == 0.0  # nothing for two seconds: no rate
+
+
 def test_vehicle_checks_pass_a_healthy_vehicle_on_the_ground():
     checks = pf.vehicle_checks(_healthy_state(), now_s=101.0, telemetry_hz=50.0, min_battery_percent=30.0)
     assert [c.status for c in checks] == [pf.PASS] * 5
@@ -96,7 +114,8 @@ def test_vehicle_checks_pass_a_healthy_vehicle_on_the_ground():
     ("change", "failing"),
     [
         (lambda st: setattr(st, "connected", False), "link and telemetry rate"),
-        (lambda st: st.counts.update(posvel=20), "link and telemetry rate"),  # 20 Hz < 0.8 × 50 Hz
+        (lambda st: _recount(st, "posvel", 20.0), "link and telemetry rate"),  # 20 Hz < 0.8 × 50 Hz
+        (lambda st: _recount(st, "attitude", 50.0, last_s=99.5), "link and telemetry rate"),  # stopped 1.5 s ago
         (lambda st: st.health.update(is_armable=False), "health"),
         (lambda st: setattr(st, "health", {}), ("health", "estimator")),
         (lambda st: setattr(st, "vn_mps", math.nan), "estimator"),

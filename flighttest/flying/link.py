@@ -216,6 +216,9 @@ def quiet_mavsdk_log() -> None:
     _log_installed = True
 
 
+RATE_WINDOW_S = 1.0  # a stream's rate is judged over the last second
+
+
 @dataclass
 class TelemetryState:
     """Latest value of every stream and its monotonic arrival time (NaN / None until first seen)."""
@@ -251,6 +254,7 @@ class TelemetryState:
     connected: bool = True
     counts: dict[str, int] = field(default_factory=dict)
     first_t: dict[str, float] = field(default_factory=dict)
+    recent: dict[str, deque[float]] = field(default_factory=dict)  # arrivals over the last RATE_WINDOW_S
 
     @property
     def alt_m(self) -> float:
@@ -270,12 +274,20 @@ class TelemetryState:
     def count(self, stream: str, t: float) -> None:
         self.counts[stream] = self.counts.get(stream, 0) + 1
         self.first_t.setdefault(stream, t)
+        recent = self.recent.setdefault(stream, deque())
+        recent.append(t)
+        while t - recent[0] > RATE_WINDOW_S:
+            recent.popleft()
 
     def rate_hz(self, stream: str, now: float) -> float:
-        n, t0 = self.counts.get(stream, 0), self.first_t.get(stream)
-        if t0 is None or n < 2 or now - t0 <= 0:
+        """Samples per second over the last ``RATE_WINDOW_S`` (since the first, if that came later): the rate
+        the autopilot sends now. An average since the connection counted the second before it took the rate
+        asked of it (ArduCopter SITL: 39 Hz of 50, a flight refused: bench/RESULTS.md)."""
+        t0 = self.first_t.get(stream)
+        if t0 is None or now - t0 <= 0:
             return 0.0
-        return (n - 1) / (now - t0)
+        n = sum(1 for t in self.recent.get(stream, ()) if now - t < RATE_WINDOW_S)
+        return n / min(RATE_WINDOW_S, now - t0)
 
 
 Listener = Callable[[float], None]

@@ -218,13 +218,22 @@ def trajectory_checks(
 # -- vehicle -------------------------------------------------------------------------------------------
 
 
+RATE_NEEDED_FRACTION = 0.8  # of the telemetry rate asked for: the guard's debounce and horizon assume it
+
+
+def telemetry_rates_ok(st: TelemetryState, now_s: float, telemetry_hz: float) -> bool:
+    """Position-velocity and attitude both arrive at ``RATE_NEEDED_FRACTION`` of ``telemetry_hz`` or more."""
+    need = RATE_NEEDED_FRACTION * telemetry_hz
+    return all(st.rate_hz(s, now_s) >= need for s in ("posvel", "attitude"))
+
+
 def vehicle_checks(
     st: TelemetryState, now_s: float, telemetry_hz: float, min_battery_percent: float
 ) -> list[Check]:
     out = []
-    need = 0.8 * telemetry_hz
+    need = RATE_NEEDED_FRACTION * telemetry_hz
     rates = {s: st.rate_hz(s, now_s) for s in ("posvel", "attitude")}
-    ok = st.connected and all(r >= need for r in rates.values())
+    ok = st.connected and telemetry_rates_ok(st, now_s, telemetry_hz)
     out.append(Check(
         "link and telemetry rate", PASS if ok else FAIL,
         f"{'connected' if st.connected else 'DISCONNECTED'}, position-velocity {rates['posvel']:.0f} Hz, "

@@ -47,6 +47,7 @@ from flighttest.flying.preflight import (
     ground_height_check,
     mode_check,
     param_checks,
+    telemetry_rates_ok,
     trajectory_checks,
     trajectory_stats,
     vehicle_checks,
@@ -88,6 +89,7 @@ PROGRESS = {Phase.PREFLIGHT: "connected: preflight checks", Phase.ARM: "arming",
 # while PX4 flies itself (its takeoff, its Land) telemetry missing longer than this starts the ladder
 LAND_STALE_S = gd.AUTOPILOT_STALE_S
 PARAMS_TIMEOUT_S = 3.0  # the preflight parameter snapshot may delay a flight by at most this
+RATE_WAIT_S = 10.0  # the preflight waits this long at most for the telemetry rate it asked for
 
 
 class _Refused(Exception):
@@ -581,6 +583,12 @@ class MissionRunner:
         # on, a pilot's mode means a takeover (flighttest.flying.watch), so the flight starts from another
         await self._leave_mode(rules.pilot_modes, "is a pilot's mode")
         await asyncio.sleep(1.0)  # a second of telemetry to measure its rate
+        # ArduCopter SITL took seconds to send the rate asked of it on a second connection (21 Hz of 50 in the
+        # last second before the check): wait for it, bounded; still short, the check says so
+        await link.wait_for(lambda s: telemetry_rates_ok(s, self.now(), self.fl.telemetry_hz), RATE_WAIT_S)
+        # judged now: reading every parameter below takes the link's bandwidth for a moment (ArduCopter SITL's
+        # 1354 over TCP: 23 Hz of telemetry in the second after)
+        checks = vehicle_checks(link.state, self.now(), self.fl.telemetry_hz, self.fl.min_battery_percent)
         # every parameter, read once and bounded (a slow link must not hold the flight up): the checks take
         # theirs from it; without it each is asked for alone (a name the firmware lacks waits out a timeout)
         from flighttest.analysis.params import snapshot
@@ -611,7 +619,6 @@ class MissionRunner:
         accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
         stats = trajectory_stats(self.traj, self.limits.region, accel, self.ff.drag_per_s, self.watch.wind_ned_mps())
         ab = self.cfg.abort
-        checks = vehicle_checks(link.state, self.now(), self.fl.telemetry_hz, self.fl.min_battery_percent)
         checks.append(mode_check(link.state.flight_mode, rules))
         wind = self.watch.wind()
         checks.append(wind_check(math.hypot(*wind.ned_mps[:2]), wind.sd_mps, wind.source, self.fl.max_wind_mps))
