@@ -135,3 +135,13 @@ def test_a_folders_optimum_is_its_summarys_first_then_its_plans():
     assert opt.logged_optimum_s({"summary": {"optimum_s": "4"}, "trajectory_meta": {"optimum": {"x": 1}}}) is None
     assert opt.logged_optimum_s({"summary": {"optimum_s": -1.0}}) is None
     assert opt.logged_optimum_s(None) is None
+
+
+def test_analyses_line_names_hover_to_hover_and_the_ratio():
+    from flighttest.analysis import legend
+
+    rec = {**dict.fromkeys(dtime.MAIN_DESCENT_KEYS), "basis": dtime.BASIS_PLANNED, "descent_time_s": 5.0,
+           "horizontal_error_m": 0.3, **opt.efficiency(5.5, 2.9)}  # fmt: skip
+    assert "; hover to hover 5.50 s, 1.90× the optimum" in legend.main_text(rec)
+    rec.update(opt.efficiency(None, 2.9))
+    assert "hover to hover" not in legend.main_text(rec)

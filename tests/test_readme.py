@@ -26,6 +26,8 @@ from pathlib import Path
 
 import pytest
 
+from flighttest.flying.params_file import read_params
+
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 KINDS = ("setup", "hardware", "fake", "run")
@@ -154,6 +156,9 @@ def test_the_readme_block_runs_against_the_fake(index, readme_fake, tmp_path):
     if lang == "python":  # one flight: its outcome printed, its folder under logs/
         assert proc.stdout.strip().splitlines()[-1].split()[0] == "completed", proc.stdout  # the block's print
         assert [p.name.split("-")[-1] for p in (work / "logs").iterdir()] == ["helix"]
+    elif "flighttest params" in block:  # saved, one change applied, the saved value restored
+        assert read_params(work / "before.params")["MPC_Z_VEL_MAX_DN"] == 1.5
+        assert proc.stdout.count("set 1 of 1") == 2, proc.stdout  # apply 1.2, restore 1.5
     elif "campaign" in block:
         (out,) = [Path(m) for m in re.findall(r"-o\s+(\S+)", block)]
         assert (work / out / "report" / "summary.md").is_file()

@@ -85,4 +85,8 @@ def main_text(main: dict | None, note: str | None = None) -> str:
                 f"{_n(main.get('horizontal_error_m'))} m off the end point sideways")  # fmt: skip
     else:
         text = f"not reached{plan}: {figures} in {_n(main.get('duration_s'))} s"
+    h2h, ratio = main.get("hover_to_hover_s"), main.get("flown_over_optimum")
+    if isinstance(h2h, int | float):
+        text += f"; hover to hover {_n(h2h)} s" + (f", {_n(ratio)}× the optimum" if isinstance(ratio, int | float)
+                                                   else "")  # fmt: skip
     return text + (f"; {main['note']}" if main.get("note") else "")
