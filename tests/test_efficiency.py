@@ -145,3 +145,20 @@ def test_analyses_line_names_hover_to_hover_and_the_ratio():
     assert "; hover to hover 5.50 s, 1.90× the optimum" in legend.main_text(rec)
     rec.update(opt.efficiency(None, 2.9))
     assert "hover to hover" not in legend.main_text(rec)
+
+
+def test_an_optimum_stopped_by_the_clock_is_not_kept(tmp_path, monkeypatch):
+    # a busy machine's IPOPT wall-time stop is no answer for the next flight (as the wind plans' cache)
+    from flighttest.planner.wind_plans import WALL_TIME_STATUS
+
+    monkeypatch.setenv("FLIGHTTEST_CACHE", str(tmp_path / "cache"))
+    profile = load_profile("x500")
+    traj = load_mission_module("vertical").plan(profile, load_mission_config(mission_config_path("vertical")))
+    stopped = opt.Optimum("vertical", None, 3.0, (0.0, 0.0, 0.0), why=f"did not converge ({WALL_TIME_STATUS})")
+    monkeypatch.setattr(opt, "solve", lambda *_: stopped)
+    assert opt.optimum_for(traj, profile) == stopped
+    assert not list((tmp_path / "cache").rglob("optimum-*.json"))
+    monkeypatch.undo()
+    monkeypatch.setenv("FLIGHTTEST_CACHE", str(tmp_path / "cache"))
+    assert opt.optimum_for(traj, profile).optimum_s > 0  # solved again, and kept
+    assert len(list((tmp_path / "cache").rglob("optimum-*.json"))) == 1

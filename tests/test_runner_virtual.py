@@ -306,6 +306,16 @@ def test_ardupilot_limits_read_at_the_preflight_are_planned_within(tmp_path, nam
     assert "rides it" in checks[name]["requirement"]  # the limit bounds the plan: raising it would pay
 
 
+def test_no_plan_within_the_vehicles_own_limits_is_refused_before_arming(tmp_path):
+    def replan(_profile):
+        raise ValueError("IPOPT: restoration failed")  # what a planner may raise, not only FlighttestError
+
+    f = fly(tmp_path, autopilot=ARDUPILOT, request={"replan": replan})
+    assert f.outcome.outcome == "refused" and f.outcome.exit_code == 2
+    assert f.outcome.abort_reason.startswith("no plan within the vehicle's own limits (WP_ACC_Z 1 ")
+    assert "restoration failed" in f.outcome.abort_reason and "arm" not in [c for _, c in f.ap.commands]
+
+
 def test_ardupilot_flies_the_descent_in_guided_and_lands(tmp_path):
     f = fly_ap(tmp_path)
     assert f.outcome.outcome == "completed" and f.outcome.descent_time_s is not None

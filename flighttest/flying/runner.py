@@ -653,7 +653,7 @@ class MissionRunner:
         self.progress(f"the vehicle's own limits differ from the profile's: {'; '.join(diffs)}: planning within them")
         try:
             traj, wind_plans = await asyncio.to_thread(req.replan, profile)
-        except FlighttestError as exc:
+        except Exception as exc:  # the planner's failure, whatever it raised: one line, nothing armed
             raise _Refused(f"no plan within the vehicle's own limits ({'; '.join(diffs)}): {exc}") from None
         check_duration(traj)
         req.profile, req.trajectory, req.wind_plans = profile, traj, wind_plans

@@ -179,7 +179,7 @@ def optimum_for(traj: Trajectory, profile: VehicleProfile, progress=lambda _: No
         return None
     if q is None:
         return None
-    from flighttest.planner.wind_plans import planning_lock
+    from flighttest.planner.wind_plans import WALL_TIME_STATUS, planning_lock
 
     path = _cache_path(profile, q)
     with planning_lock(path):
@@ -190,6 +190,8 @@ def optimum_for(traj: Trajectory, profile: VehicleProfile, progress=lambda _: No
         if q["kind"] == "helix":
             progress("the planner's optimum for this helix (margin 0, full limits): a few seconds")
         opt = solve(profile, q)
+        if opt.why is not None and WALL_TIME_STATUS in opt.why:  # a busier moment stopped it: not for ever
+            return opt
         with contextlib.suppress(OSError):
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(".tmp")
