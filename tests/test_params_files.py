@@ -13,8 +13,9 @@ import time
 import pytest
 from pymavlink import mavutil
 
+from flighttest.analysis.params import same_value
 from flighttest.errors import FlighttestError
-from flighttest.flying.params_file import changes, format_value, read_params, same_value, write_params
+from flighttest.flying.params_file import changes, file_text, read_params, write_params
 
 
 def _cli(*argv: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
@@ -58,7 +59,8 @@ def test_a_saved_file_reads_back_as_it_was_written(tmp_path):
     # Mission Planner's NAME,value lines load too
     (tmp_path / "mp.param").write_text("WP_ACC_Z,2.0\nFS_GCS_ENABLE,1\n# a comment\n\nPSC_JERK_D 10\n")
     assert read_params(tmp_path / "mp.param") == {"WP_ACC_Z": 2.0, "FS_GCS_ENABLE": 1, "PSC_JERK_D": 10}
-    assert format_value(1.2000000476837158) == "1.2" and same_value(0.1, 0.10000000149011612)
+    assert file_text(1.2000000476837158) == "1.2" and file_text(94502.83) == "94502.83"
+    assert same_value(0.1, 0.10000000149011612)
 
 
 @pytest.mark.parametrize("line, message", [

@@ -108,7 +108,7 @@ def guess_autopilot(params: dict[str, Any] | None) -> str | None:
     return best if votes[best] > 0 else None
 
 
-def _same(a: Any, b: Any) -> bool:
+def same_value(a: Any, b: Any) -> bool:
     """Equal as parameters: a float32 read back over MAVLink (2.799999952) equals the 2.8 written."""
     if a is None or b is None:
         return a is b
@@ -136,7 +136,7 @@ def differences(snapshots: list[dict[str, Any]]) -> dict[str, list[Any]]:
     for name in names:
         vals = [s.get(name) for s in known]
         first = vals[0]
-        if any(v is None for v in vals) or not all(_same(first, v) for v in vals[1:]):
+        if any(v is None for v in vals) or not all(same_value(first, v) for v in vals[1:]):
             out[name] = [s.get(name) if s else None for s in snapshots]
     return out
 

@@ -83,7 +83,7 @@ def cmd_save(args: argparse.Namespace) -> int:
 
 
 def change_table(todo, title: str) -> Table:
-    from flighttest.flying.params_file import format_value
+    from flighttest.analysis.params import format_value
 
     t = Table(title=title, box=box.SIMPLE_HEAD, title_justify="left")
     for col in ("parameter", "on the vehicle", "the file's"):

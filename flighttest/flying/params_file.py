@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flighttest.analysis.params import same_value
 from flighttest.errors import FlighttestError
 from flighttest.inputs import atomic_write, read_text_file, shown
 
@@ -41,13 +42,9 @@ class ParamChange:
         return {"name": self.name, "now": self.now, "new": self.new}
 
 
-def same_value(a: float | int, b: float | int) -> bool:
-    """Equal as the vehicle stores a parameter (single precision)."""
-    return bool(np.float32(a) == np.float32(b))
-
-
-def format_value(v: float | int) -> str:
-    """The shortest text that reads back as the same single-precision value (1.2, not 1.20000005)."""
+def file_text(v: float | int) -> str:
+    """A value as the file holds it: the shortest text that reads back as the same single-precision value
+    (1.2, not 1.20000005; 94502.83 whole, where a table's ``analysis.params.format_value`` rounds)."""
     return str(int(v)) if isinstance(v, int) else np.format_float_positional(np.float32(v), trim="-")
 
 
@@ -61,7 +58,7 @@ def write_params(path: Path | str, params: dict[str, float | int], sysid: int = 
     for name in sorted(params):
         v = params[name]
         kind = MAV_PARAM_TYPE_INT32 if isinstance(v, int) else MAV_PARAM_TYPE_REAL32
-        lines.append(f"{sysid}\t{compid}\t{name}\t{format_value(v)}\t{kind}")
+        lines.append(f"{sysid}\t{compid}\t{name}\t{file_text(v)}\t{kind}")
     try:
         with atomic_write(path) as tmp:
             tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")

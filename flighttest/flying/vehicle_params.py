@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from flighttest.analysis.params import format_value, same_value
 from flighttest.errors import FlighttestError
-from flighttest.flying.params_file import ParamChange, changes, format_value, read_params, same_value, write_params
+from flighttest.flying.params_file import ParamChange, changes, read_params, write_params
 
 # the full set on ArduCopter (about 1300 parameters) takes a few seconds over UDP, longer on a radio
 READ_ALL_TIMEOUT_S = 60.0
