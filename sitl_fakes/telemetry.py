@@ -21,6 +21,7 @@ from sitl_fakes.px4 import Mode
 
 M = mavlink
 EARTH_RADIUS_M = 6_378_137.0  # WGS-84 equatorial, as flighttest's loaders read it back
+BARO_NOISE_M = 0.06  # SIH's barometer: ALTITUDE.altitude_monotonic's σ on the ground (../shared/px4_sih)
 PX4_VERSION = (1 << 24) | (15 << 16) | (0 << 8) | 255  # v1.15.0 official
 CAPABILITIES = (
     M.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
@@ -69,6 +70,7 @@ def default_rates_hz(main_hz: float) -> dict[int, float]:
         M.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 2.0,
         M.MAVLINK_MSG_ID_WIND_COV: 2.0,
         M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+        M.MAVLINK_MSG_ID_ALTITUDE: 10.0,  # PX4 SITL's tlogs: 10 Hz (../shared/px4_sih)
         M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: 0.0,  # on request only
     }
 
@@ -96,6 +98,7 @@ class Telemetry:
             M.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: self.actuator_output_status,
             M.MAVLINK_MSG_ID_WIND_COV: self.wind_cov,
             M.MAVLINK_MSG_ID_VFR_HUD: self.vfr_hud,
+            M.MAVLINK_MSG_ID_ALTITUDE: self.altitude,
             M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
         }
         self.truth_interval_s = 1.0 / truth_rate_hz if truth_rate_hz > 0 else 0.0
@@ -111,6 +114,7 @@ class Telemetry:
         self._imu_rng = random.Random(cfg.seed * 15485863 + 11)
         self._imu_noise = cfg.imu_noise_mps2
         self._imu_bias = cfg.imu_bias_mps2
+        self._baro_rng = random.Random(cfg.seed * 32452843 + 5)
 
     # -- scheduling ----------------------------------------------------------------------------------
     def can_send(self, msg_id: int) -> bool:
@@ -339,6 +343,14 @@ class Telemetry:
             math.hypot(s.vn_mps, s.ve_mps), math.hypot(s.vn_mps, s.ve_mps), hdg, throttle,
             self.v.cfg.home_alt_m - s.d_m, -s.vd_mps,
         )  # fmt: skip
+
+    def altitude(self):
+        """PX4's ALTITUDE: ``altitude_monotonic`` the barometer's (the truth with SIH's noise, 0.06 m σ in
+        ../shared/px4_sih's hovers), the others the estimate's."""
+        est, amsl = self.v.est, self.v.cfg.home_alt_m
+        baro = amsl - self.v.body.state.d_m + self._baro_rng.gauss(0.0, BARO_NOISE_M)
+        return M.MAVLink_altitude_message(self.boot_us(), baro, amsl - est.d_m, -est.d_m, -est.d_m, -est.d_m,
+                                          float("nan"))  # fmt: skip
 
     def autopilot_version(self):
         return M.MAVLink_autopilot_version_message(

@@ -18,6 +18,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from build_up_checks import assert_build_up
 from flighttest.campaign.state import STEPS, CampaignState
 from flighttest.campaign.summary import REPORT_FILES
 from flighttest.errors import FlighttestError
@@ -37,7 +38,7 @@ def _steps(out: Path) -> dict:
 
 
 @pytest.mark.flight
-@pytest.mark.timeout(900)
+@pytest.mark.timeout(1200)
 def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     out = tmp_path / "campaign"
     env = {**os.environ, "FLIGHTTEST_VEHICLES": str(tmp_path / "my_vehicles")}
@@ -57,8 +58,9 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     probe_log = first["probe"]["outputs"]["log_dir"]
     plan_mtime = (out / "plans" / "helix.csv").stat().st_mtime
 
-    # second run, the same command: resumes at the vertical baseline from the files already written
-    done = subprocess.run(_campaign(out), capture_output=True, text=True, timeout=600, env=env)
+    # second run, the same command with a build-up of two flights per descent (issue 22): resumes at the
+    # vertical baseline from the files already written
+    done = subprocess.run(_campaign(out, "--build-up", "2"), capture_output=True, text=True, timeout=800, env=env)
     assert done.returncode == 0, done.stderr[-3000:]
     s = json.loads(done.stdout)
     steps = _steps(out)
@@ -84,6 +86,8 @@ def test_campaign_interrupted_resumes_and_finishes(tmp_path):
     assert load_profile(out / "vehicles" / "x500.toml").w_allow_mps == pytest.approx(stored)
     assert CampaignState.open(out, "x500").steps["plan"].outputs["w_allow_mps"] == pytest.approx(stored)
     assert not (tmp_path / "my_vehicles").exists()
+    # the build-up: margins from evidence, the fastest clean flight kept, the truth never in its VRS region
+    assert_build_up(out, s, most=2)
     # both descents flown to the end with the guard silent, the helix clearly faster over the same height
     flights = {f["step"]: f for f in s["flights"]}
     for name in ("vertical", "helix"):

@@ -234,3 +234,35 @@ def plot_descent_comparison(vertical: Analysis, helix: Analysis, out: Path) -> P
     ax2.set_title(f"descent time: helix speed-up {speedup:.2f}× (vertical / helix)")
     ax2.grid(axis="x", alpha=0.3)
     return _save(fig, out)
+
+
+def plot_build_up(build_up: dict[str, list[dict]], out: Path) -> Path:
+    """The build-up of each descent, flight by flight (``flighttest.campaign.build_up``): the margin each was
+    planned with and the least the guard saw (left), hover to hover against the optimum (right). A flight that
+    did not complete with the guard silent is a cross."""
+    fig, (ax_m, ax_t) = plt.subplots(1, 2, figsize=(10, 4), dpi=DPI)
+    for mission, colour in (("vertical", VERTICAL_COLOUR), ("helix", HELIX_COLOUR)):
+        rows = build_up.get(mission) or []
+        if not rows:
+            continue
+        k = np.array([r["flight"] for r in rows], float)
+        clean = np.array([r.get("outcome") == "completed" and bool(r.get("guard_silent")) for r in rows])
+
+        def col(key: str, rows=rows) -> np.ndarray:
+            return np.array([np.nan if r.get(key) is None else float(r[key]) for r in rows])
+
+        for ax, y, label in ((ax_m, col("margin_mps"), f"{mission}: planned margin"),
+                             (ax_t, col("flown_over_optimum"), f"{mission}: flown / optimum")):  # fmt: skip
+            ax.plot(k, y, "-", color=colour, label=label)
+            ax.plot(k[clean], y[clean], "o", color=colour)
+            ax.plot(k[~clean], y[~clean], "x", color="red", markersize=9)
+        ax_m.plot(k, col("min_margin_mps"), "--", color=colour, label=f"{mission}: guard's least margin")
+    ax_m.axhline(0.0, color="0.6", lw=0.8)
+    ax_m.set(xlabel="build-up flight", ylabel="m/s", title="margin inside the guard's bound")
+    ax_t.axhline(1.0, color="0.6", lw=0.8)
+    ax_t.set(xlabel="build-up flight", ylabel="× optimum", title="hover to hover / the planner's optimum")
+    for ax in (ax_m, ax_t):
+        ax.xaxis.get_major_locator().set_params(integer=True)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    return _save(fig, out)

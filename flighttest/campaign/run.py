@@ -74,6 +74,7 @@ class CampaignRequest:
     yes: bool = False  # ask neither before each step nor for each flight's GO
     stale_periods: float | None = None  # the guard's stale-telemetry allowance; None: the mission configs'
     show_panel: bool = False  # each flight's live panel (a terminal that shows only progress)
+    build_up: int = 1  # the most flights of each descent, margins narrowed (flighttest.campaign.build_up)
 
     def __post_init__(self) -> None:
         if (self.connect is None) == (self.sim is None):
@@ -83,6 +84,8 @@ class CampaignRequest:
                 raise ValueError(f"{name}: {step!r} is not a step ({', '.join(STEPS)})")
         if self.only and self.start:
             raise ValueError("only and start exclude each other")
+        if isinstance(self.build_up, bool) or not isinstance(self.build_up, int) or self.build_up < 1:
+            raise ValueError(f"build_up: the most flights per descent, an integer ≥ 1 (got {self.build_up!r})")
 
 
 def _not_busy(text: str) -> contextlib.AbstractContextManager[Any]:
@@ -193,7 +196,8 @@ class Campaign:
 
             ctx = StepContext(state=state, vehicle=req.vehicle, connect=connect, yes=req.yes,
                               stale_periods=req.stale_periods, show_panel=req.show_panel,
-                              confirm=hooks.confirm_flight, print_fn=hooks.say)  # fmt: skip
+                              confirm=hooks.confirm_flight, print_fn=hooks.say,
+                              build_up=req.build_up)  # fmt: skip
             t0 = time.monotonic()
             stop: list[str] = []  # a Ctrl-C during a ground step: finish it, then stop
             hooks.heading(f"[bold]flighttest campaign — {self.profile.name} — {state.dir.root}")

@@ -96,6 +96,10 @@ class CampaignDir:
     def identify_file(self) -> Path:
         return self.root / "identify.json"
 
+    def build_up_file(self, mission: str) -> Path:
+        """A descent's build-up so far (``flighttest.campaign.build_up``): what a resume goes on from."""
+        return self.root / "build_up" / f"{mission}.json"
+
 
 @dataclass
 class StepRecord:
@@ -163,9 +167,10 @@ class CampaignState:
         value = self.steps[step].outputs.get(key)
         return self.dir.root / value if value else None
 
-    def _relative(self, value: Any) -> Any:
+    def relative(self, value: Any) -> Any:
+        """A path (or a list of them) relative to the campaign folder; anything else as it is."""
         if isinstance(value, list):
-            return [self._relative(v) for v in value]
+            return [self.relative(v) for v in value]
         try:
             return str(Path(value).resolve().relative_to(self.dir.root.resolve()))
         except (TypeError, ValueError):
@@ -211,7 +216,7 @@ class CampaignState:
         rec = self.steps[step]
         rec.status = StepStatus(status)  # a bare "done" too; anything else is a bug, refused here
         rec.elapsed_s = round(time.time() - (rec.started_unix_s or time.time()), 3)
-        rec.outputs = {k: self._relative(v) if k in PATH_KEYS else v for k, v in (outputs or {}).items()}
+        rec.outputs = {k: self.relative(v) if k in PATH_KEYS else v for k, v in (outputs or {}).items()}
         rec.error = error
         self.save()
 

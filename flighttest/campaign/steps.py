@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import hashlib
+import json
 import math
 import re
 from collections.abc import Callable
@@ -20,6 +22,16 @@ from typing import Any
 import pandas as pd
 import tomli_w
 
+from flighttest.campaign.build_up import (
+    BUILD_UP_KEYS,
+    EXPAND_KEYS,
+    BuildUpFlight,
+    MarginBudget,
+    best_flight,
+    first_budget,
+    next_budget,
+    stop_reason,
+)
 from flighttest.campaign.state import CampaignDir, CampaignState
 from flighttest.errors import FlighttestError
 from flighttest.flying.log_writer import write_json_atomic
@@ -31,6 +43,7 @@ from flighttest.model.profiles import VehicleProfile, load_profile, profile_to_d
 from flighttest.model.trajectory import Trajectory
 from flighttest.planner.optimum import EFFICIENCY_KEYS, OPTIMUM_KEY, with_optimum
 
+BUDGET_KEY = "margin_budget"  # a plan's metadata and a descent step's outputs: the margin and its terms
 # the outcomes that make a flight step done (docs/CONTRACTS.md, "Flight outcomes and phases")
 FLIGHT_OK = {"probe": (Outcome.PROBE_STOPPED, Outcome.COMPLETED), "vertical": (Outcome.COMPLETED,),
              "helix": (Outcome.COMPLETED,)}  # fmt: skip
@@ -56,6 +69,7 @@ class StepContext:
     show_panel: bool = False
     confirm: Callable[[Any], bool] | None = None  # the flight's go/no-go after preflight
     print_fn: Callable[[Any], None] = print
+    build_up: int = 1  # the most flights of each descent (flighttest.campaign.build_up); 1: one flight
 
     @property
     def dir(self) -> CampaignDir:
@@ -96,6 +110,21 @@ def write_configs(d: CampaignDir) -> None:
 
 def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfig, traj: Trajectory,
          traj_path: str = "", wind_plans: list[Trajectory] | None = None, replan=None) -> dict[str, Any]:  # fmt: skip
+    rec = _flight(ctx, step, profile, cfg, traj, traj_path, wind_plans, replan)
+    if rec["outcome"] not in FLIGHT_OK[step]:
+        raise StepFailed(failure_line(step, rec), rec)
+    return rec
+
+
+def failure_line(step: str, rec: dict[str, Any]) -> str:
+    why = rec.get("abort_reason") or "no reason given"
+    return f"{step} flight {rec['outcome']}: {why}" + (f" (log {rec['log_dir']})" if rec.get("log_dir") else "")
+
+
+def _flight(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfig, traj: Trajectory,
+            traj_path: str = "", wind_plans: list[Trajectory] | None = None,
+            replan=None) -> dict[str, Any]:  # fmt: skip
+    """One flight and its record, whatever its outcome."""
     from flighttest.flying.runner import FlyRequest, fly
 
     req = FlyRequest(
@@ -110,9 +139,6 @@ def _fly(ctx: StepContext, step: str, profile: VehicleProfile, cfg: MissionConfi
            "descent_time_s": out.descent_time_s, "planned_descent_s": out.extra.get("planned_descent_s"),
            "horizontal_error_m": out.extra.get("horizontal_error_m"), "guard_aborts": aborts,
            **{k: out.extra.get(k) for k in EFFICIENCY_KEYS}}  # fmt: skip
-    if out.outcome not in FLIGHT_OK[step]:
-        why = out.abort_reason or "no reason given"
-        raise StepFailed(f"{step} flight {out.outcome}: {why}" + (f" (log {out.log_dir})" if out.log_dir else ""), rec)
     return rec
 
 
@@ -190,7 +216,9 @@ def run_plan(ctx: StepContext) -> dict[str, Any]:
     for mission in ("vertical", "helix"):
         module = load_mission_module(mission)
         # with the planner's optimum for it, the yardstick of the flight's efficiency (one solve, cached)
-        traj = with_optimum(module.plan(profile, ctx.config(mission)), profile, ctx.print_fn)
+        cfg = ctx.config(mission)
+        traj = with_optimum(module.plan(profile, cfg), profile, ctx.print_fn)
+        traj.meta[BUDGET_KEY] = config_budget(mission, cfg).to_dict()
         path = ctx.dir.plans / f"{mission}.csv"
         traj.save(path)
         out[mission] = str(path)
@@ -202,10 +230,22 @@ def run_plan(ctx: StepContext) -> dict[str, Any]:
     return out
 
 
-def _wind_plans(ctx: StepContext, module: Any, profile: VehicleProfile, mission: str) -> list[Trajectory]:
+def _wind_plans(ctx: StepContext, module: Any, profile: VehicleProfile, mission: str,
+                cfg: MissionConfig | None = None) -> list[Trajectory]:  # fmt: skip
     if not hasattr(module, "plans_for_wind"):
         return []
-    return module.plans_for_wind(profile, ctx.config(mission), ctx.print_fn)
+    return module.plans_for_wind(profile, cfg or ctx.config(mission), ctx.print_fn)
+
+
+def config_budget(mission: str, cfg: MissionConfig) -> MarginBudget:
+    """The descent's margin inside the guard's bound (``BUILD_UP_KEYS``) and its tracking room (``EXPAND_KEYS``)
+    as its config sets them: a vehicle with no history."""
+    from flighttest.flying.plan_config import VerticalPlanConfig
+    from flighttest.planner.tracking import TrackingMargin
+
+    values = VerticalPlanConfig.from_table(cfg.plan) if mission == "vertical" else TrackingMargin.from_plan(cfg.plan)
+    key = BUILD_UP_KEYS[mission]
+    return first_budget(key, getattr(values, key), {k: getattr(values, k) for k in EXPAND_KEYS[mission]})
 
 
 def run_descent(ctx: StepContext, mission: str) -> dict[str, Any]:
@@ -214,12 +254,97 @@ def run_descent(ctx: StepContext, mission: str) -> dict[str, Any]:
     traj = Trajectory.load(path, profile)
     wind_plans = [Trajectory.load(p, profile) for p in sorted(ctx.dir.plans.glob(f"{mission}-wind*.csv"))]
     module = load_mission_module(mission)
+    if ctx.build_up > 1:
+        return _build_up(ctx, mission, profile, module, traj, Path(path), wind_plans)
+    return _fly(ctx, mission, profile, ctx.config(mission), traj, str(path), wind_plans,
+                _replanner(ctx, module, mission, ctx.config(mission)))  # fmt: skip
 
+
+def _replanner(ctx: StepContext, module: Any, mission: str, cfg: MissionConfig):
     def replan(p: VehicleProfile) -> tuple[Trajectory, list[Trajectory]]:
         """The plan step's work again for ``p``, the vehicle's own limits (read at the flight's preflight)."""
-        return with_optimum(module.plan(p, ctx.config(mission)), p, ctx.print_fn), _wind_plans(ctx, module, p, mission)
+        return with_optimum(module.plan(p, cfg), p, ctx.print_fn), _wind_plans(ctx, module, p, mission, cfg)
 
-    return _fly(ctx, mission, profile, ctx.config(mission), traj, str(path), wind_plans, replan)
+    return replan
+
+
+def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: Any, first: Trajectory,
+              first_path: Path, first_wind_plans: list[Trajectory]) -> dict[str, Any]:  # fmt: skip
+    """Up to ``ctx.build_up`` flights of ``mission``, each narrower than the last by what they proved; the
+    record of each written as it lands, so that a resume goes on from the next one."""
+    from flighttest.analysis.margin_evidence import flight_evidence, no_evidence
+
+    cfg0 = ctx.config(mission)
+    key, rules, caps = BUILD_UP_KEYS[mission], cfg0.build_up, EXPAND_KEYS[mission]
+    record = ctx.dir.build_up_file(mission)
+    plan_id = hashlib.sha256(first_path.read_bytes()).hexdigest()
+    flights = _build_up_so_far(record, plan_id)
+    budget = config_budget(mission, cfg0) if not flights else next_budget(key, flights, rules, caps)
+    fixed = mission == "helix" and bool(cfg0.plan.get("trajectory"))  # a planned file flies as planned
+    # resumed: the flights so far may already end it (a smaller N this time)
+    why = stop_reason(flights, budget, ctx.build_up, rules) if flights else None
+    while why is None:
+        k = len(flights) + 1
+        cfg = cfg0 if k == 1 else dataclasses.replace(cfg0, plan={**cfg0.plan, **budget.plan_changes()})
+        if k == 1:
+            traj, path, wind_plans = first, first_path, first_wind_plans
+        else:
+            room = ", ".join(f"{name} {v:.3g}" for name, v in budget.expanded)
+            ctx.print_fn(f"build-up {mission} flight {k}: {key} {budget.margin_mps:.3f} m/s ({budget.note}), "
+                         f"{room}; planning …")
+            try:
+                traj = with_optimum(module.plan(profile, cfg), profile, ctx.print_fn)
+                wind_plans = _wind_plans(ctx, module, profile, mission, cfg)
+            except FlighttestError as exc:  # no plan for these margins: the flights so far are the build-up
+                why = f"no plan for flight {k}'s margins: {exc}"
+                ctx.print_fn(f"build-up {mission}: stops: {why}")
+                break
+            traj.meta[BUDGET_KEY] = budget.to_dict()
+            path = ctx.dir.plans / f"{mission}-build-up-{k}.csv"
+            traj.save(path)
+        rec = _flight(ctx, mission, profile, cfg, traj, str(path), wind_plans, _replanner(ctx, module, mission, cfg))
+        if k == 1 and rec["outcome"] not in FLIGHT_OK[mission]:
+            raise StepFailed(failure_line(mission, rec), rec)  # the first flight is the campaign's single flight
+        evidence = flight_evidence(rec["log_dir"]) if rec.get("log_dir") else no_evidence(rec.get("outcome"))
+        flights.append(BuildUpFlight(k, budget, evidence, str(path), rec))
+        budget = next_budget(key, flights, rules, caps)
+        why = ("the helix flies a planned file ([plan] trajectory): nothing to narrow" if fixed
+               else stop_reason(flights, budget, ctx.build_up, rules))  # fmt: skip
+        _write_build_up(record, plan_id, flights, why)
+        ctx.print_fn(f"build-up {mission} flight {k}: {build_up_line(flights[-1])}"
+                     + (f"; stops: {why}" if why else f"; next {key} {budget.margin_mps:.3f} m/s"))  # fmt: skip
+    _write_build_up(record, plan_id, flights, why)  # finished: a later run starts a new build-up
+    best = best_flight(flights)
+    rows = [{**f.row(), "log_dir": ctx.state.relative(f.evidence.log_dir), "plan": ctx.state.relative(f.plan)}
+            for f in flights]  # fmt: skip
+    if best is None:  # cannot happen: the first flight completed or the step failed above
+        raise StepFailed(f"{mission}: no build-up flight completed", {"build_up": rows})
+    return {**best.record, "build_up": rows, "build_up_stop": why, "build_up_best": best.k,
+            BUDGET_KEY: best.budget.to_dict()}  # fmt: skip
+
+
+def build_up_line(f: BuildUpFlight) -> str:
+    e = f.evidence
+    h2h = f"{e.hover_to_hover_s:.2f} s hover to hover" if e.hover_to_hover_s is not None else "no hover-to-hover time"
+    least = f", guard's least margin {e.min_margin_mps:.3f} m/s" if e.min_margin_mps is not None else ""
+    return f"{e.outcome}, margin {f.margin_mps:.3f} m/s, {h2h}{least}" + ("" if e.guard_silent else ", guard spoke")
+
+
+def _build_up_so_far(path: Path, plan_id: str) -> list[BuildUpFlight]:
+    """The flights of an unfinished build-up of the same plan; none for a finished one, another plan's or a
+    damaged record (a new build-up starts)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if data.get("plan_sha256") != plan_id or data.get("stopped"):
+            return []
+        return [BuildUpFlight.from_dict(d) for d in data["flights"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+
+
+def _write_build_up(path: Path, plan_id: str, flights: list[BuildUpFlight], why: str | None) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(path, {"plan_sha256": plan_id, "stopped": why, "flights": [f.to_dict() for f in flights]})
 
 
 def run_report(ctx: StepContext) -> dict[str, Any]:

@@ -20,6 +20,7 @@ from flighttest.analysis import legend
 from flighttest.analysis.compare import add_speedup, compare_row
 from flighttest.analysis.descent_time import HOVER_RULE, DescentRule
 from flighttest.campaign.state import STEPS, CampaignState
+from flighttest.campaign.steps import BUDGET_KEY
 from flighttest.errors import FlighttestError
 from flighttest.flying.log_writer import write_json_atomic
 from flighttest.model.profiles import VehicleProfile
@@ -87,11 +88,74 @@ def campaign_summary(state: CampaignState, profile: VehicleProfile, rows: dict[s
         "vertical_flown_over_optimum": vert.get("flown_over_optimum"),
         "helix_flown_over_optimum": helix.get("flown_over_optimum"),
         "flights": [rows[s] for s in DESCENTS if s in rows],
+        # each descent's build-up, flight by flight (campaign --build-up N), and why it stopped
+        "build_up": {d: state.steps[d].outputs.get("build_up") or [] for d in DESCENTS},
+        "build_up_stop": {d: state.steps[d].outputs.get("build_up_stop") for d in DESCENTS},
+        # the margin each kept flight was planned with and its terms (flighttest.campaign.build_up)
+        "margin_budget": {d: margin_budget(state, d) for d in DESCENTS},
         "probe_log": str(probe_log) if probe_log else None,
         "steps_elapsed_s": {s: state.steps[s].elapsed_s for s in STEPS},
         "report": str(state.dir.report),
         "flighttest_version": __version__,
     }
+
+
+def margin_budget(state: CampaignState, descent: str) -> dict[str, Any] | None:
+    """The margin budget of the flight the campaign kept: the step's (a build-up), else its plan's."""
+    kept = state.steps[descent].outputs.get(BUDGET_KEY)
+    if kept:
+        return kept
+    plan = state.maybe_path("plan", descent)
+    if plan is None:
+        return None
+    try:
+        meta = json.loads(Path(plan).with_suffix(".json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return meta.get(BUDGET_KEY) if isinstance(meta, dict) else None
+
+
+BUILD_UP_COLUMNS = (  # the report's build-up table: header, key, format
+    ("flight", "flight", "{}"), ("margin m/s", "margin_mps", "{:.3f}"), ("outcome", "outcome", "{}"),
+    ("hover→hover s", "hover_to_hover_s", "{:.2f}"), ("÷ optimum", "flown_over_optimum", "{:.2f}"),
+    ("plan's least margin m/s", "plan_min_margin_mps", "{:.3f}"), ("guard's least m/s", "min_margin_mps", "{:.3f}"),
+    ("used m/s", "used_mps", "{:.3f}"),
+    ("estimate error m/s", "estimate_mps", "{:.3f}"), ("guard silent", "guard_silent", "{}"),
+)  # fmt: skip
+
+
+def build_up_markdown(summary: dict) -> list[str]:
+    """The report's build-up section, a table per descent and why each stopped; none without a build-up."""
+    build_up = summary.get("build_up") or {}
+    if not any(len(build_up.get(d) or []) > 1 for d in DESCENTS):
+        return []
+    lines = ["", "## Build-up", "",
+             "Each flight after the first was planned with the margin what the earlier ones proved allows "
+             "(`flighttest.campaign.build_up`); the campaign keeps the fastest that completed with the guard silent.",
+             "", "![build-up](build_up.png)"]  # fmt: skip
+    for d in DESCENTS:
+        rows = build_up.get(d) or []
+        if not rows:
+            continue
+        lines += ["", f"### {d}", "", "| " + " | ".join(h for h, _, _ in BUILD_UP_COLUMNS) + " |",
+                  "|" + "---:|" * len(BUILD_UP_COLUMNS)]  # fmt: skip
+        lines += ["| " + " | ".join(cell(r, k, f) for _, k, f in BUILD_UP_COLUMNS) + " |" for r in rows]
+        stop = (summary.get("build_up_stop") or {}).get(d)
+        if stop:
+            lines += ["", f"Stopped: {stop}."]
+    return lines
+
+
+def budget_markdown(summary: dict) -> list[str]:
+    """Each kept flight's margin and the terms it is made of, with where each came from."""
+    out: list[str] = []
+    for d in DESCENTS:
+        b = (summary.get("margin_budget") or {}).get(d)
+        if not b:
+            continue
+        out.append(f"- {d}: `{b['key']}` {b['margin_mps']:.3f} m/s ({b.get('note') or 'the terms summed'})")
+        out += [f"  - {t['name']} {t['value_mps']:.3f} m/s: {t['source']}" for t in b.get("terms", ())]
+    return ["", "## Margins", "", *out] if out else []
 
 
 def known_summary(state: CampaignState, profile: VehicleProfile) -> dict[str, Any]:
@@ -203,6 +267,9 @@ def summary_markdown(summary: dict) -> str:
         "",
         *(f"- {label}: {text}" for label, text in row_legend()),
         "",
+        *budget_markdown(summary),
+        *build_up_markdown(summary),
+        "",
         "Every flight in detail, its plan under its flown path, the probe's fluctuation plot with the onset:",
         "[report.md](report.md).",
         "",
@@ -227,7 +294,7 @@ def _write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dic
     from flighttest.analysis.loaders import load_log
     from flighttest.analysis.pipeline import analyse
     from flighttest.analysis.report import write_report
-    from flighttest.campaign.figures import plot_descent_comparison, plot_tracks_velocity_space
+    from flighttest.campaign.figures import plot_build_up, plot_descent_comparison, plot_tracks_velocity_space
 
     out_dir = state.dir.report
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -264,6 +331,8 @@ def _write_campaign_report(state: CampaignState, profile: VehicleProfile) -> dic
                                probe=analyses.get("probe"))  # fmt: skip
     plot_descent_comparison(analyses["vertical"], analyses["helix"], out_dir / "descent_times.png")
     summary = campaign_summary(state, profile, rows)
+    if any(len(summary["build_up"][d]) > 1 for d in DESCENTS):
+        plot_build_up(summary["build_up"], out_dir / "build_up.png")
     write_json_atomic(out_dir / "summary.json", summary)
     (out_dir / "summary.md").write_text(summary_markdown(summary), encoding="utf-8")
     return {"report_dir": str(out_dir), "files": [str(out_dir / f) for f in REPORT_FILES],

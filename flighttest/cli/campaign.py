@@ -14,6 +14,7 @@ files of the earlier ones (e.g. --only plan after editing DIR/config/helix_desce
 --only helix); --from STEP runs it and everything after.
 
   flighttest campaign --sim --yes -o logs/campaign                 # ground rehearsal on the fake
+  flighttest campaign --sim --yes -o logs/build-up --build-up 3    # each descent up to 3 times, narrower each time
   flighttest campaign --vehicle x500 --connect udpin://0.0.0.0:14540 -o logs/2026-12-01-field
 """
 
@@ -73,6 +74,11 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help="stale-telemetry allowance in telemetry periods (default: the mission configs' "
                    "stale_after_s, 0.25 s); "
                    "raise it only when rehearsing on a heavily loaded machine")  # fmt: skip
+    p.add_argument("--build-up", type=BUILD_UP, default=1, metavar="N",
+                   help="fly the vertical baseline and the helix up to N times each, every flight's margin narrowed "
+                   "by what the earlier ones proved; stops at the floor, on any word from the guard, or when the "
+                   "time stops improving, and keeps the fastest clean flight (default 1: one flight each; "
+                   "[build_up] in the mission configs)")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the campaign summary as JSON (progress on stderr)")
     g = p.add_argument_group("the fake vehicle (--sim)")
     g.add_argument("--truth-onset", type=float, metavar="MPS",
@@ -97,6 +103,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # guard would fly on for a second without knowing where the vehicle is
 STALE_PERIODS = Range(1.0, 50.0, "telemetry periods")
 SEED = Range(0, 2**32 - 1, integer=True)  # what the fake's random generator takes
+BUILD_UP = Range(1, 20, integer=True)  # flights per descent; 20 is a long day already
 
 
 def _validate(args: argparse.Namespace) -> SimOptions | None:
@@ -232,7 +239,7 @@ def _open(args: argparse.Namespace) -> Campaign:
     profile = load_profile(vehicle)
     request = CampaignRequest(out_dir=_output_dir(args.output), vehicle=vehicle, connect=args.connect, sim=sim,
                               only=args.only, start=args.start, yes=args.yes, stale_periods=args.stale_periods,
-                              show_panel=_out(args).is_terminal and not args.json)  # fmt: skip
+                              build_up=args.build_up, show_panel=_out(args).is_terminal and not args.json)  # fmt: skip
     campaign = Campaign.open(request, profile)
     # refused before anything is written: a campaign that cannot start leaves no folder behind
     if campaign.steps and not args.yes and not sys.stdin.isatty():

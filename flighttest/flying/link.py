@@ -51,6 +51,8 @@ MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_CMD_DO_SET_MODE = 176
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 SYS_STATUS_MSG_ID = 1
+SCALED_PRESSURE_MSG_ID = 29
+BARO_HZ = 10.0
 # SYS_STATUS carries the sensor-health bits MAVSDK's health (and the preflight) is made of: ArduPilot
 # streams nothing unless asked (../shared/ardupilot_sitl: without it MAVSDK's health stayed false)
 SYS_STATUS_HZ = 2.0
@@ -568,6 +570,9 @@ class VehicleLink:
         self.rules = rules_for(await self.autopilot_name())
         if self.rules.name == ARDUPILOT:
             await self.request_message_rate(SYS_STATUS_MSG_ID, SYS_STATUS_HZ, "SYS_STATUS")
+            # the barometer in the log, for the estimate's error a build-up judges (PX4 sends ALTITUDE at 10 Hz
+            # by itself; ArduCopter SITL's tlogs had none)
+            await self.request_message_rate(SCALED_PRESSURE_MSG_ID, BARO_HZ, "SCALED_PRESSURE")
         for setter in (tel.set_rate_position_velocity_ned, tel.set_rate_attitude_quaternion, tel.set_rate_imu):
             try:
                 await self.call(setter(hz), setter.__name__, 5.0)

@@ -10,6 +10,9 @@
                 fluct_min_rate_std_dps, fluct_min_accel_std_mps2
     [abort]     recover_max_s, arrested_vd_mps, hold_confirm_s, hold_dwell_s, recovery_lateral_mps,
                 recovery_climb_mps, recovery_s
+    [build_up]  floor_mps, reserve_mps, estimate_default_mps, max_narrow_fraction, min_gain_fraction,
+                expand_fraction
+                (``flighttest campaign --build-up N``: vertical and helix)
 
 Every key has a type and a physical range (``_RANGES``; ``[plan]``: ``_PLAN``, per mission). Unknown
 keys, wrong types and out-of-range numbers are one ``FlighttestError`` line naming the file and the
@@ -102,6 +105,23 @@ class AbortConfig:
 
 
 @dataclass(frozen=True)
+class BuildUpConfig:
+    """How ``flighttest campaign --build-up N`` narrows a descent's margin from flight to flight
+    (``flighttest.campaign.build_up``): the helix's ``guard_margin_mps``, the vertical's ``extra_margin_mps``."""
+
+    floor_mps: float = 0.1  # never narrower than this, whatever the evidence
+    reserve_mps: float = 0.05  # kept on top of what the evidence measured
+    # the estimate's error where the log has no barometer to measure it against: PX4 SIH's EKF2 vertical
+    # velocity, 0.15 m/s median (sitl_fakes/estimator.py), with room
+    estimate_default_mps: float = 0.2
+    max_narrow_fraction: float = 0.5  # one flight narrows the margin by at most this fraction of it
+    min_gain_fraction: float = 0.02  # a flight not this much faster (hover to hover) than the last ends it
+    # the tracking room (the helix's rate fraction and thrust rate, the vertical's acceleration fraction) grows
+    # by this after a clean flight
+    expand_fraction: float = 0.25
+
+
+@dataclass(frozen=True)
 class MissionConfig:
     mission: str
     flight: FlightConfig = field(default_factory=FlightConfig)
@@ -109,6 +129,7 @@ class MissionConfig:
     guard: GuardConfig = field(default_factory=GuardConfig)
     abort: AbortConfig = field(default_factory=AbortConfig)
     path: str = ""
+    build_up: BuildUpConfig = field(default_factory=BuildUpConfig)
 
     def to_dict(self) -> dict[str, Any]:
         from dataclasses import asdict
@@ -119,6 +140,7 @@ class MissionConfig:
             "plan": dict(self.plan),
             "guard": asdict(self.guard),
             "abort": asdict(self.abort),
+            "build_up": asdict(self.build_up),
             "path": self.path,
         }
 
@@ -169,6 +191,13 @@ _RANGES: dict[str, Range] = {
     "arrested_vd_mps": Range(0.0, 5.0, "m/s", lo_open=True),
     "hold_confirm_s": Range(0.0, 30.0, _S, lo_open=True),
     "hold_dwell_s": Range(0.0, 60.0, _S),
+    # [build_up]
+    "floor_mps": Range(0.0, 2.0, "m/s"),
+    "reserve_mps": Range(0.0, 2.0, "m/s"),
+    "estimate_default_mps": Range(0.0, 2.0, "m/s"),
+    "max_narrow_fraction": Range(0.0, 1.0, lo_open=True),
+    "min_gain_fraction": Range(0.0, 1.0),
+    "expand_fraction": Range(0.0, 1.0),
 }
 
 # [plan]: what each mission's planner reads (missions/*.py), typed and bounded. A key that is not
@@ -271,7 +300,7 @@ def _validated_plan(mission: str, raw: dict[str, Any], where: str) -> dict[str, 
 def mission_config_from_dict(data: dict[str, Any], path: str = "<config>") -> MissionConfig:
     if not isinstance(data, dict):
         raise FlighttestError(f"{path}: a mission config must be a TOML table")
-    allowed = {"mission", "flight", "plan", "guard", "abort"}
+    allowed = {"mission", "flight", "plan", "guard", "abort", "build_up"}
     for key in data:
         if key not in allowed:
             raise FlighttestError(
@@ -281,7 +310,7 @@ def mission_config_from_dict(data: dict[str, Any], path: str = "<config>") -> Mi
     if not isinstance(mission, str) or mission not in MISSION_KINDS:
         raise FlighttestError(f"{path}: 'mission' must be one of {', '.join(MISSION_KINDS)} (got {shown(mission)})")
     sections = {}
-    for name in ("flight", "plan", "guard", "abort"):
+    for name in ("flight", "plan", "guard", "abort", "build_up"):
         raw = data.get(name, {})
         if not isinstance(raw, dict):
             raise FlighttestError(f"{path}: [{name}] must be a table")
@@ -290,11 +319,12 @@ def mission_config_from_dict(data: dict[str, Any], path: str = "<config>") -> Mi
     guard = _validated(GuardConfig, sections["guard"], f"{path} [guard]")
     abort = _validated(AbortConfig, sections["abort"], f"{path} [abort]")
     plan = _validated_plan(mission, sections["plan"], f"{path} [plan]")
+    build_up = _validated(BuildUpConfig, sections["build_up"], f"{path} [build_up]")
     if flight.start_height_m <= flight.min_alt_m:
         raise FlighttestError(f"{path} [flight]: start_height_m must exceed min_alt_m")
     if not 1.0 <= flight.rate_hz <= 200.0:
         raise FlighttestError(f"{path} [flight]: rate_hz must lie in [1, 200] (got {flight.rate_hz:g})")
-    return MissionConfig(mission, flight, plan, guard, abort, str(path))
+    return MissionConfig(mission, flight, plan, guard, abort, str(path), build_up)
 
 
 def load_mission_config(path: Path | str) -> MissionConfig:

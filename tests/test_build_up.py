@@ -1,0 +1,222 @@
+"""The build-up's rules (issue 22, items 3 and 5), in virtual time: the margin budget from a flight's
+evidence, when a build-up stops, which flight it keeps, and the evidence read off a log folder."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from flighttest.analysis.margin_evidence import (
+    MarginEvidence,
+    airborne_window,
+    estimate_error,
+    flight_evidence,
+    guard_over,
+)
+from flighttest.campaign.build_up import (
+    BuildUpFlight,
+    MarginBudget,
+    best_flight,
+    first_budget,
+    next_budget,
+    stop_reason,
+)
+from flighttest.errors import FlighttestError
+from flighttest.flying.missions_config import BuildUpConfig, mission_config_from_dict
+
+RULES = BuildUpConfig()
+KEY = "extra_margin_mps"
+
+
+def evidence(least=0.3, h2h=10.0, estimate=None, outcome="completed", flags=0, aborts=0,
+             plan=None) -> MarginEvidence:  # fmt: skip
+    return MarginEvidence(log_dir="logs/x", outcome=outcome, min_margin_mps=least, plan_min_margin_mps=plan,
+                          guard_flags=flags,
+                          guard_aborts=aborts, tracking_mps=0.05, estimate_mps=estimate,
+                          estimate_source="ALTITUDE.altitude_monotonic" if estimate is not None else "no barometer",
+                          hover_to_hover_s=h2h, flown_over_optimum=None if h2h is None else h2h / 5.0)  # fmt: skip
+
+
+def flight(k, margin, **kw) -> BuildUpFlight:
+    return BuildUpFlight(k, MarginBudget(KEY, margin), evidence(**kw), f"plans/v-{k}.csv")
+
+
+def test_no_history_flies_the_config_margin():
+    b = first_budget(KEY, 0.35, {"accel_fraction": 0.15})
+    assert b.margin_mps == 0.35 and [t.name for t in b.terms] == ["config"] and "no history" in b.note
+    assert b.plan_changes() == {KEY: 0.35, "accel_fraction": 0.15}
+    assert MarginBudget.from_dict(json.loads(json.dumps(b.to_dict()))) == b
+
+
+def test_the_budget_is_the_used_margin_the_estimate_and_the_reserve():
+    # planned 0.35, the guard's least 0.30: 0.05 used; the barometer measured 0.04
+    b = next_budget(KEY, [flight(1, 0.35, least=0.30, estimate=0.04)], RULES)
+    terms = {t.name: t.value_mps for t in b.terms}
+    assert terms == pytest.approx({"tracking": 0.05, "estimate": 0.04, "reserve": RULES.reserve_mps})
+    assert b.margin_mps == pytest.approx(max(RULES.floor_mps, 0.14, 0.35 * (1 - RULES.max_narrow_fraction)))
+    assert "narrower than flight 1" in b.note  # half of 0.35 is more than the evidence's 0.14
+    # the most any flight used counts, not the last one's
+    b2 = next_budget(KEY, [flight(1, 0.35, least=0.10, estimate=0.04), flight(2, 0.30, least=0.28)], RULES)
+    assert {t.name: t.value_mps for t in b2.terms}["tracking"] == pytest.approx(0.25)
+    assert b2.margin_mps == pytest.approx(0.25 + 0.04 + RULES.reserve_mps) and b2.note == "the evidence"
+
+
+def test_the_margin_used_is_counted_from_the_plans_own_least_margin():
+    # a helix planned with 0.4 whose rates kept it 0.575 from the bound; the guard saw 0.33 at least
+    f = BuildUpFlight(1, MarginBudget("guard_margin_mps", 0.4), evidence(least=0.33, plan=0.575), "plans/h.csv")
+    assert f.used_mps == pytest.approx(0.245)
+    b = next_budget("guard_margin_mps", [f], RULES)
+    assert {t.name: t.value_mps for t in b.terms}["tracking"] == pytest.approx(0.245)
+    assert "plan kept 0.575" in b.terms[0].source
+
+
+def test_an_unmeasured_estimate_takes_the_default_and_says_why():
+    b = next_budget(KEY, [flight(1, 0.35, least=0.34)], RULES)
+    est = next(t for t in b.terms if t.name == "estimate")
+    assert est.value_mps == RULES.estimate_default_mps and "no barometer" in est.source
+
+
+def test_the_floor_holds_whatever_the_evidence():
+    rules = BuildUpConfig(floor_mps=0.2, reserve_mps=0.0, max_narrow_fraction=1.0)
+    b = next_budget(KEY, [flight(1, 0.35, least=0.35, estimate=0.0)], rules)
+    assert b.margin_mps == 0.2 and "floor" in b.note
+
+
+def test_a_margin_used_beyond_the_plan_asks_for_more_not_less():
+    # the guard's least margin below zero: the flight used more than it had; the budget grows
+    b = next_budget(KEY, [flight(1, 0.35, least=-0.05, estimate=0.05)], RULES)
+    assert b.margin_mps > 0.35
+
+
+@pytest.mark.parametrize("flights, upcoming, most, expected", [
+    ([flight(1, 0.35, outcome="aborted")], 0.2, 5, "ended aborted"),
+    ([flight(1, 0.35, flags=3)], 0.2, 5, "guard was not silent"),
+    ([flight(1, 0.35, aborts=1)], 0.2, 5, "guard was not silent"),
+    ([flight(1, 0.35, h2h=10.0), flight(2, 0.2, h2h=9.9)], 0.15, 5, "time stopped improving"),
+    ([flight(1, 0.35, h2h=10.0), flight(2, 0.2, h2h=None)], 0.15, 5, "no hover-to-hover time"),
+    ([flight(1, 0.35), flight(2, 0.2, h2h=8.0)], 0.15, 2, "2 flights"),
+    ([flight(1, 0.1)], 0.1, 5, "at the floor"),
+    ([flight(1, 0.35)], 0.348, 5, "nothing to change"),
+    ([flight(1, 0.35)], 0.40, 5, "nothing to change"),
+    ([flight(1, 0.35), flight(2, 0.2, h2h=8.0)], 0.15, 5, None),
+])  # fmt: skip
+def test_when_a_build_up_stops(flights, upcoming, most, expected):
+    why = stop_reason(flights, MarginBudget(KEY, upcoming), most, RULES)
+    assert (why is None) if expected is None else (expected in why)
+
+
+def test_tracking_room_widens_only_after_a_clean_flight_that_kept_its_reserve():
+    caps = {"rate_fraction": 0.5, "thrust_rate_max_mps3": 100.0}
+    room = (("rate_fraction", 0.35), ("thrust_rate_max_mps3", 8.0))
+
+    def one(**kw) -> BuildUpFlight:
+        return BuildUpFlight(1, MarginBudget("guard_margin_mps", 0.4, (), "", room), evidence(**kw), "plans/h.csv")
+
+    wide = dict(next_budget("guard_margin_mps", [one(least=0.39, estimate=0.05)], RULES, caps).expanded)
+    assert wide == pytest.approx({"rate_fraction": 0.35 * 1.25, "thrust_rate_max_mps3": 10.0})
+    capped = BuildUpFlight(2, MarginBudget("guard_margin_mps", 0.3, (), "", (("rate_fraction", 0.45),)),
+                           evidence(least=0.3, estimate=0.0), "plans/h2.csv")  # fmt: skip
+    assert dict(next_budget("guard_margin_mps", [capped], RULES, caps).expanded) == {"rate_fraction": 0.5}
+    # the guard's least margin did not keep the estimate's 0.2 and the reserve: the room stays
+    assert dict(next_budget("guard_margin_mps", [one(least=0.2, estimate=0.2)], RULES, caps).expanded) == dict(room)
+    # the guard spoke: the room stays, and the build-up stops there anyway
+    assert dict(next_budget("guard_margin_mps", [one(least=0.39, flags=2)], RULES, caps).expanded) == dict(room)
+    # more room earned keeps a build-up going at the floor, where the margin cannot narrow
+    f = BuildUpFlight(1, MarginBudget("guard_margin_mps", RULES.floor_mps, (), "", room),
+                      evidence(least=RULES.floor_mps, estimate=0.0), "plans/h.csv")  # fmt: skip
+    upcoming = next_budget("guard_margin_mps", [f], RULES, caps)
+    assert upcoming.margin_mps == RULES.floor_mps and stop_reason([f], upcoming, 5, RULES) is None
+    assert "at the floor" in stop_reason([f], MarginBudget("guard_margin_mps", RULES.floor_mps, (), "", room), 5, RULES)
+
+
+def test_the_kept_flight_is_the_fastest_clean_one():
+    fs = [flight(1, 0.35, h2h=10.0), flight(2, 0.2, h2h=8.0), flight(3, 0.15, h2h=7.0, flags=4)]
+    assert best_flight(fs).k == 2  # the third was faster but the guard spoke
+    assert best_flight([flight(1, 0.35, h2h=10.0, flags=1), flight(2, 0.2, outcome="aborted")]).k == 1
+    assert best_flight([flight(1, 0.35, outcome="aborted")]) is None
+
+
+def test_a_flight_round_trips_through_its_record():
+    f = flight(2, 0.2, estimate=0.03)
+    back = BuildUpFlight.from_dict(json.loads(json.dumps(f.to_dict())))
+    assert back == f and back.used_mps == pytest.approx(0.2 - 0.3)
+
+
+def test_the_estimate_error_is_twice_its_rms_against_the_barometer():
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 30.0, 0.02)
+    bt = np.arange(0.0, 30.0, 0.1)
+    true_climb = 0.5 * np.sin(t / 3.0)  # a vehicle going up and down
+    true_alt = np.interp(bt, t, 5.0 + np.cumsum(true_climb) * 0.02)
+    baro = true_alt + rng.normal(0.0, 0.06, bt.size)
+    # an estimate off by a steady 0.1 m/s: twice its RMS, whatever the vehicle did and the barometer's noise
+    err = estimate_error(t, -(true_climb + 0.1), bt, baro, 0.0, 30.0)
+    assert err == pytest.approx(0.2, abs=0.04)
+    assert estimate_error(t, -true_climb, bt, true_alt, 0.0, 30.0) == pytest.approx(0.0, abs=0.02)
+    assert estimate_error(t, -true_climb, bt, baro, 0.0, 4.0) is None  # too few windows
+    assert estimate_error(t, -true_climb, bt[::10], baro[::10], 0.0, 30.0) is None  # 1 Hz: too few per window
+
+
+def test_the_airborne_window():
+    t = np.arange(0.0, 10.0, 0.1)
+    d = np.where((t > 2.0) & (t < 8.0), -3.0, 0.0)
+    assert airborne_window(t, d) == pytest.approx((2.05, 7.95), abs=0.1)
+    assert airborne_window(t, np.zeros_like(t)) is None
+
+
+def test_the_guard_over_the_descent_only():
+    g = pd.DataFrame({"t_s": [0.0, 1.0, 2.0, 3.0], "verdict": ["marginal", "ok", "ok", "predicted"],
+                      "margin_mps": [-0.1, 0.3, 0.2, 0.05], "action": ["none"] * 4})  # fmt: skip
+    assert guard_over(g, 1.0, 2.0) == (0.2, 0)
+    assert guard_over(g, 0.0, 3.0) == (-0.1, 2)
+
+
+def test_a_folder_without_a_guard_log_is_refused(tmp_path):
+    with pytest.raises(FlighttestError, match="not a flighttest flight folder"):
+        flight_evidence(tmp_path)
+
+
+@pytest.mark.parametrize("table, message", [
+    ({"floor_mps": -0.1}, "'floor_mps'"),
+    ({"max_narrow_fraction": 0.0}, "'max_narrow_fraction'"),
+    ({"reserve": 0.1}, "unknown key"),
+    ({"min_gain_fraction": "2 %"}, "'min_gain_fraction'"),
+])  # fmt: skip
+def test_bad_build_up_tables_are_one_line(table, message):
+    with pytest.raises(FlighttestError, match=message):
+        mission_config_from_dict({"mission": "vertical", "build_up": table}, "v.toml")
+
+
+def test_the_shipped_configs_hold_the_defaults():
+    from flighttest.flying.mission_scripts import mission_config_path
+    from flighttest.flying.missions_config import load_mission_config
+
+    for mission in ("vertical", "helix"):
+        assert load_mission_config(mission_config_path(mission)).build_up == BuildUpConfig()
+
+
+@pytest.mark.parametrize("value", ["0", "21", "two", "1.5"])
+def test_build_up_count_is_checked_before_anything_runs(tmp_path, value):
+    r = subprocess.run([sys.executable, "-m", "flighttest", "campaign", "--sim", "--yes", "-o", str(tmp_path / "c"),
+                        "--build-up", value], capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert r.returncode == 2 and "--build-up" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "c").exists()
+
+
+def test_a_resume_goes_on_only_from_an_unfinished_build_up_of_the_same_plan(tmp_path):
+    from flighttest.campaign.steps import _build_up_so_far, _write_build_up
+
+    path = tmp_path / "build_up" / "vertical.json"
+    flights = [flight(1, 0.35), flight(2, 0.2, h2h=8.0)]
+    _write_build_up(path, "abc", flights, None)
+    assert _build_up_so_far(path, "abc") == flights
+    assert _build_up_so_far(path, "another plan") == []
+    _write_build_up(path, "abc", flights, "2 flights, the most asked for")
+    assert _build_up_so_far(path, "abc") == []  # finished: a new build-up
+    path.write_text("{not json", encoding="utf-8")
+    assert _build_up_so_far(path, "abc") == []
