@@ -21,6 +21,7 @@ Only flighttest folders carry the plan and the guard's log; for anything else th
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -63,8 +64,6 @@ class MarginEvidence:
 
 
 def _events(folder: Path) -> list[dict[str, Any]]:
-    import json
-
     path = folder / "events.jsonl"
     out = []
     if path.is_file():
@@ -154,8 +153,6 @@ def _tracking(log, t0_s: float, t1_s: float) -> float | None:
 
 def _plan_margin(folder: Path) -> float | None:
     """The preflight's least margin of the plan to the guard's bound (``preflight.json``), None without it."""
-    import json
-
     try:
         v = json.loads((folder / "preflight.json").read_text(encoding="utf-8"))["trajectory"]["guard_margin_min_mps"]
     except (OSError, ValueError, KeyError, TypeError):
@@ -165,8 +162,6 @@ def _plan_margin(folder: Path) -> float | None:
 
 def flight_evidence(log_dir: Path | str) -> MarginEvidence:
     """The evidence of one flighttest flight folder (raises FlighttestError for anything else)."""
-    import json
-
     from flighttest.analysis.loaders import load_log
 
     folder = Path(log_dir)
