@@ -82,8 +82,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="MAVLink system id (default 1; give two fakes different ids to test vehicle selection)")
     p.add_argument("--duration-s", type=float, default=0.0, help="exit after this long (default: run until stopped)")
     p.add_argument("--estimate-error", type=float, default=1.0, metavar="SCALE",
-                   help="scales the estimate's offset from the truth (PX4 SIH's EKF2, or with --autopilot "
-                        "ardupilot ArduCopter SITL's EKF3; default 1, 0 = a perfect estimator)")
+                   help="scales the estimate's offset from the truth (PX4 SIH's EKF2 of today, or with --autopilot "
+                        "ardupilot ArduCopter SITL's EKF3; default 1, 0 = a perfect estimator, 8 = about "
+                        "PX4's EKF2 of 2026-03)")
     p.add_argument("--telemetry-gap-rate-hz", type=float, default=0.1, metavar="HZ",
                    help="how often the telemetry goes quiet for 50-100 ms, as real links do "
                         "(default 0.1 per second; 0 = never)")

@@ -80,8 +80,9 @@ BRAKE_SPEED_Z_MPS = 2.5
 # ArduCopter SITL's EKF3 against its own truth (DataFlash XKF1 against SIM2 while airborne, three flights of
 # ../shared/ardupilot_sitl and bench/RESULTS.md's vertical): height 0.08-0.09 m high (sd 0.025, drifting over
 # 3-9 s), horizontal position within 0.01 m, horizontal velocity 0.015 m/s (over ~3 s), vertical velocity
-# sd 0.008-0.015 m/s (decorrelating in 0.3 s). PX4 SIH's EKF2 is 10-20 times further off (bench/RESULTS.md,
-# "This change: the vertical ramps its acceleration at the jerk; the fake's vertical loop is ArduCopter's")
+# sd 0.008-0.015 m/s (decorrelating in 0.3 s). PX4 SIH's EKF2 of 2026-03 was 10-20 times further off
+# (bench/RESULTS.md, "This change: the vertical ramps its acceleration at the jerk; the fake's vertical loop
+# is ArduCopter's"); today's is as close as this (sitl_fakes.estimator)
 SITL_ESTIMATE_ERROR = EstimateError(
     horizontal_sigma_m=0.012, horizontal_tau_s=2.5, height_sigma_m=0.09, height_tau_s=8.0, smoothing_s=0.5,
     horizontal_vel_sigma_mps=0.016, horizontal_vel_tau_s=3.0, vertical_vel_sigma_mps=0.012,

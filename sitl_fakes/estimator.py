@@ -1,16 +1,17 @@
 """An estimate that is not the truth, as PX4's EKF2 on SIH: a height offset and a slow horizontal wander.
 
-In the reference flights (``../shared/px4_sih``) PX4's height is 0.3–0.7 m off the simulator's truth in
-flight and a "vertical" descent wanders 0.3–0.8 m sideways. PX4 flies its estimate, so the fake's
-controller does too and its telemetry reports it; the truth log keeps the truth.
+PX4 flies its estimate, so the fake's controller does too and its telemetry reports it; the truth log
+keeps the truth. How far off EKF2 is depends on the firmware (estimate − SIH's ground truth in the
+``.ulg``, in the air; bench/RESULTS.md, "The fake's EKF2 on today's PX4"):
 
-Measured on those flights (estimate − SIH's ground truth, in the air): velocity errors of 0.09–0.15
-m/s (vertical) and 0.12–0.29 m/s (horizontal) standard deviation, correlated over about 1.5 s
-(vertical) and 3.5 s (horizontal). The vertical figures below are those of 30 flights of our own on
-PX4 SITL, larger and slower (median 0.15 m/s over 2.8 s): enough for the EKF to trail a slow descent
-(bench/RESULTS.md, "This change: the catch-up limit, the helix's thrust-rate bound, settling on the
-position's rate."). Position offsets: 0.3–0.7 m in height, 0.1–0.2 m horizontally, drifting over tens
-of seconds.
+- PX4 main ``0d4ae424`` (2026-08; ``../shared/wind_sitl`` and our own builds, eight flights): velocity
+  errors of 0.013–0.036 m/s (horizontal) and 0.008–0.022 m/s (vertical) standard deviation,
+  decorrelating in 1–3 s; position within 0.01–0.08 m. The defaults of ``EstimateError``.
+- PX4 main ``02e73e3b`` (2026-03; ``../shared/px4_sih`` and 30 flights of our own): about ten times
+  further off — horizontal velocity 0.12–0.29 m/s, vertical 0.09–0.22 m/s (median 0.15 over 2.8 s),
+  height 0.3–0.7 m, a "vertical" descent wandering 0.3–0.8 m sideways: enough for the EKF to trail a slow
+  descent (bench/RESULTS.md, "This change: the catch-up limit, the helix's thrust-rate bound, settling on
+  the position's rate"). ``PX4_SIH_2026_03``; the fake's ``--estimate-error 8`` comes close.
 
 Each error is a seeded Ornstein–Uhlenbeck process; the position offset is a slow one (smoothed by a
 first-order lag) plus the velocity error integrated with a leak (GPS pulls the EKF back within
@@ -30,18 +31,20 @@ from sitl_fakes.physics import RigidBodyState
 
 @dataclass(frozen=True)
 class EstimateError:
-    horizontal_sigma_m: float = 0.15
-    horizontal_tau_s: float = 15.0
-    height_sigma_m: float = 0.4
-    height_tau_s: float = 20.0
-    smoothing_s: float = 2.0  # the lag that keeps the position offsets' rate small
-    horizontal_vel_sigma_mps: float = 0.2
-    horizontal_vel_tau_s: float = 3.5
-    vertical_vel_sigma_mps: float = 0.16
-    vertical_vel_tau_s: float = 3.0
+    """Standard deviations and correlation times of the estimate's errors (defaults: PX4 main 0d4ae424)."""
+
+    horizontal_sigma_m: float = 0.02
+    horizontal_tau_s: float = 3.0
+    height_sigma_m: float = 0.04
+    height_tau_s: float = 3.0
+    smoothing_s: float = 0.5  # the lag that keeps the position offsets' rate small
+    horizontal_vel_sigma_mps: float = 0.022
+    horizontal_vel_tau_s: float = 2.0
+    vertical_vel_sigma_mps: float = 0.015
+    vertical_vel_tau_s: float = 2.0
     position_leak_s: float = 3.0  # how fast GPS pulls the integrated velocity error back
-    # PX4's velocity error is smooth at short time scales (0.006-0.02 m/s of std faster than 1 s):
-    # the Ornstein–Uhlenbeck process goes through this lag, so its steps are not white
+    # PX4's velocity error is smooth at short time scales (0.006-0.02 m/s of std faster than 1 s on
+    # 02e73e3b): the Ornstein–Uhlenbeck process goes through this lag, so its steps are not white
     velocity_smoothing_s: float = 0.3
 
     def scaled(self, k: float) -> EstimateError:
@@ -52,6 +55,13 @@ class EstimateError:
             horizontal_vel_sigma_mps=k * self.horizontal_vel_sigma_mps,
             vertical_vel_sigma_mps=k * self.vertical_vel_sigma_mps,
         )
+
+
+# PX4 main 02e73e3b (2026-03), the firmware of ../shared/px4_sih: what the tests replaying those flights use
+PX4_SIH_2026_03 = EstimateError(
+    horizontal_sigma_m=0.15, horizontal_tau_s=15.0, height_sigma_m=0.4, height_tau_s=20.0, smoothing_s=2.0,
+    horizontal_vel_sigma_mps=0.2, horizontal_vel_tau_s=3.5, vertical_vel_sigma_mps=0.16, vertical_vel_tau_s=3.0,
+)
 
 
 class Estimator:

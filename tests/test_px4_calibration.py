@@ -26,7 +26,7 @@ from flighttest.model.profiles import load_profile
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.helix import solve_helix
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
-from sitl_fakes.estimator import EstimateError, Estimator
+from sitl_fakes.estimator import PX4_SIH_2026_03, Estimator
 from sitl_fakes.physics import RigidBodyState
 from sitl_fakes.replay import SetpointStream, replay
 
@@ -97,7 +97,7 @@ def test_vertical_overshoot_as_on_px4():
     prof = load_profile("sih_quadx")
     peaks = []
     for seed in range(6):
-        r = replay(prof, stream, start, PRE_S + 6.0, estimate_error=EstimateError(), seed=seed)
+        r = replay(prof, stream, start, PRE_S + 6.0, estimate_error=PX4_SIH_2026_03, seed=seed)
         cruise = (r.t_s > PRE_S + 1.0) & (r.t_s < PRE_S + 5.8)
         peaks.append(float(r.est_vel_ned[cruise, 2].max()))
     px4_peak = float(g[(g.t_s > t0 + 1.0) & (g.t_s < t0 + 5.8)].vd_mps.max())
@@ -135,7 +135,7 @@ def fly_plan_on_the_cascade(
     estimate error, the guard (as ``mission`` builds it) on the estimate at 50 Hz, until ``after_s``
     past the plan. Returns (time of the first abort into the plan or None, the smallest measured margin)."""
     tr = (for_autopilot(traj, ff) if ff is not None else traj).resample(50.0).df
-    err = EstimateError()
+    err = PX4_SIH_2026_03
     origin = np.array([0.0, 0.0, -7.0]) + np.asarray(Estimator(err, seed).offset_m)  # the hover, estimated
     t = np.concatenate([[0.0], tr.t_s.to_numpy() + PRE_S])
     pos = np.vstack([origin, tr[["n_m", "e_m", "d_m"]].to_numpy() + origin])
