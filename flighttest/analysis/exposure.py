@@ -13,8 +13,9 @@ Two judgements of the same samples:
 - **at the worst air within the wind's uncertainty** (``margin_worst_mps``; ``time_inside_worst_s``,
   ``min_margin_worst_mps``), as the live guard judges: every horizontal wind within
   ``WIND_COVERAGE_SIGMAS`` (2.45) σ of the estimate (its 1 σ, per sample) — 95 % of a 2-D normal —
-  through :func:`flighttest.model.frames.worst_blade_velocity_mps`. NaN where the wind's uncertainty is
-  unknown (still air assumed).
+  through :func:`flighttest.model.frames.worst_blade_velocity_mps`, with the updraft the live guard allowed for
+  the gusts it measured (``guard.csv`` ``gust_sd_mps``; none where not logged). NaN where the wind's
+  uncertainty is unknown (still air assumed).
 
 Per descent (and over the whole time airborne): time inside the guard region (margin < 0), time near it
 (0 ≤ margin < ``near_mps``), the minimum margin and the deepest point (its normalised ``v_H_n``,
@@ -27,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from flighttest.flying.wind import WIND_COVERAGE_SIGMAS
+from flighttest.flying.wind import UPDRAFT_SIGMAS, WIND_COVERAGE_SIGMAS
 from flighttest.model import aero
 from flighttest.model.frames import disk_tilt_sin, worst_blade_velocity_mps
 from flighttest.model.profiles import VehicleProfile
@@ -59,7 +60,9 @@ def velocity_track(state: pd.DataFrame, profile: VehicleProfile, wind=None) -> p
     q = s[["qw", "qx", "qy", "qz"]].to_numpy(float, copy=True)
     level = ~np.isfinite(q).all(axis=1)
     q[level] = (1.0, 0.0, 0.0, 0.0)
+    gust = 0.0
     if wind is not None:
+        gust = wind.gust_sd_mps if wind.gust_sd_mps is not None else 0.0
         wind, sd = np.nan_to_num(wind.ned_mps), wind.sd_mps
     else:
         wind, sd = np.nan_to_num(s[["wn_mps", "we_mps", "wd_mps"]].to_numpy(float)), np.full(len(s), np.nan)
@@ -76,7 +79,7 @@ def velocity_track(state: pd.DataFrame, profile: VehicleProfile, wind=None) -> p
         wind[:, 2],
     )
     w_worst, u_worst = worst_blade_velocity_mps(w, u, disk_tilt_sin(q[:, 0], q[:, 1], q[:, 2], q[:, 3]),
-                                                WIND_COVERAGE_SIGMAS * sd)  # fmt: skip
+                                                WIND_COVERAGE_SIGMAS * sd, UPDRAFT_SIGMAS * gust)  # fmt: skip
     margin_worst = np.where(np.isfinite(sd), region.margin(w_worst, u_worst), np.nan)
     v_H_n, v_z_n = region.normalised(w, u)
     vrs = profile.vrs

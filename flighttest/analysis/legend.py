@@ -23,9 +23,9 @@ COLUMNS: dict[str, str] = {
     "max(w_allow, tan(cone)·u) - margin, air-relative with the wind as estimated, judged with the profile "
     "named for the flight",
     "inside, worst air s": "the same at the worst air within the wind estimate's uncertainty "
-    f"({WIND_COVERAGE_SIGMAS:g} σ, as the live guard judges)",
+    f"({WIND_COVERAGE_SIGMAS:g} σ) and the updraft the guard allowed for the gusts, as the live guard judges",
     "inside worst s": "time inside the guard region at the worst air within the wind estimate's uncertainty "
-    f"({WIND_COVERAGE_SIGMAS:g} σ, as the live guard judges)",
+    f"({WIND_COVERAGE_SIGMAS:g} σ) and the updraft the guard allowed for the gusts, as the live guard judges",
     "near s": f"time outside the guard region but within {NEAR_MPS:g} m/s of its boundary",
     "min margin m/s": "its closest approach to the guard region's boundary (negative: inside it)",
     "wind m/s": "the horizontal wind the descent was judged with (its mean over the descent)",

@@ -70,6 +70,8 @@ class LogWind:
     ned_mps: np.ndarray
     sd_mps: np.ndarray
     notes: list[str] = field(default_factory=list)
+    # the gusts' 1 σ the live guard allowed an updraft for (guard.csv ``gust_sd_mps``; zero where not logged)
+    gust_sd_mps: np.ndarray | None = None
 
     @property
     def measured(self) -> bool:
@@ -167,7 +169,13 @@ def _logged(log: FlightLog) -> LogWind | None:
             if (~measured).any() else "")  # fmt: skip
     else:
         source, share = "logged (source not recorded)", "guard.csv of a folder written before wind_source"
-    return LogWind(source, f"the wind flighttest's guard flew with ({share})", wi, si)
+    gust = None
+    if "gust_sd_mps" in g:
+        gg = g["gust_sd_mps"].to_numpy(float)
+        ok = np.isfinite(gg)
+        if ok.any():
+            gust = np.nan_to_num(resample(t_g[ok], gg[ok], t, LOGGED_MAX_GAP_S), nan=0.0)
+    return LogWind(source, f"the wind flighttest's guard flew with ({share})", wi, si, gust_sd_mps=gust)
 
 
 # -- 2. the autopilot's own estimate ---------------------------------------------------------------

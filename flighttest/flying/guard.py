@@ -137,6 +137,7 @@ class GuardSample:
     # how far the wind may be off (the guard judges the worst air within it: flighttest.flying.wind)
     wind_radius_mps: float = 0.0
     att_age_s: float = 0.0  # the attitude paired with this velocity is this old
+    updraft_mps: float = 0.0  # the updraft the gusts allow (flighttest.flying.wind: stated or measured)
 
 
 @dataclass(frozen=True, slots=True)
@@ -382,10 +383,11 @@ class Guard:
         # "Flying the plan PX4 flies: helix and vertical on PX4 SITL and on the fake (issue 11)").
         w, u = float(w), float(u)
         wp, up = self._extrapolate(s.t_s, w, u)
-        # both judged at the worst air the wind's uncertainty allows; w and u are logged as estimated
+        # both judged at the worst air the wind's uncertainty and the gusts allow; w and u are logged as estimated
         tilt = float(disk_tilt_sin(qw, qx, qy, qz))
-        margin = float(lim.region.margin(*worst_blade_velocity_mps(w, u, tilt, s.wind_radius_mps)))
-        pmargin = float(lim.region.margin(*worst_blade_velocity_mps(wp, up, tilt, s.wind_radius_mps)))
+        worst = (tilt, s.wind_radius_mps, s.updraft_mps)
+        margin = float(lim.region.margin(*worst_blade_velocity_mps(w, u, *worst)))
+        pmargin = float(lim.region.margin(*worst_blade_velocity_mps(wp, up, *worst)))
 
         def dec(verdict: str, action: str, reason: str) -> Decision:
             return Decision(s.t_s, verdict, action, reason, w, u, margin, pmargin, s)

@@ -37,7 +37,7 @@ SETPOINT_COLUMNS = (
 GUARD_COLUMNS = (
     "t_s", "unix_s", "verdict", "w_mps", "u_mps", "margin_mps", "predicted_margin_mps", "action",
     "reason", "vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz", "wn_mps", "we_mps", "wd_mps", "alt_m",
-    "wind_sd_mps", "wind_source",
+    "wind_sd_mps", "wind_source", "gust_sd_mps",
 )  # fmt: skip
 
 
@@ -185,7 +185,8 @@ class FlightLogWriter:
         )
         row = [t, u, decision.verdict, decision.w_mps, decision.u_mps, decision.margin_mps,
                decision.predicted_margin_mps, decision.action, decision.reason, *inputs,
-               wind.sd_mps if wind is not None else math.nan, wind.source if wind is not None else ""]  # fmt: skip
+               wind.sd_mps if wind is not None else math.nan, wind.source if wind is not None else "",
+               wind.gust_sd_mps if wind is not None else math.nan]  # fmt: skip
         self._guard.writerow([csv_number(float(x)) if isinstance(x, float | int) else x for x in row])
         self.flush_if_due()
 

@@ -7,7 +7,7 @@
     [plan]      the mission's planner inputs (per mission: see _PLAN)
     [guard]     horizon_s, debounce_samples, clear_violation_mps, stale_after_s (or stale_periods), observe_region,
                 max_descent_mps, fluct_window_s, max_rate_std_dps, max_accel_std_mps2, fluct_ratio,
-                fluct_min_rate_std_dps, fluct_min_accel_std_mps2
+                fluct_min_rate_std_dps, fluct_min_accel_std_mps2, gust_sd_mps
     [abort]     recover_max_s, arrested_vd_mps, hold_confirm_s, hold_dwell_s, recovery_lateral_mps,
                 recovery_climb_mps, recovery_s
     [build_up]  floor_mps, reserve_mps, estimate_default_mps, max_narrow_fraction, min_gain_fraction,
@@ -91,6 +91,9 @@ class GuardConfig:
     fluct_ratio: float | None = None  # × the hover fluctuation measured in the settle before streaming
     fluct_min_rate_std_dps: float = 0.0  # the ratio's threshold is never below these
     fluct_min_accel_std_mps2: float = 0.0
+    # the day's gusts as the operator knows them (1 σ, m/s): the guard allows an updraft of 1.96 × the larger
+    # of this and what it measures itself (flighttest.flying.wind.GustMeter), which no autopilot reports
+    gust_sd_mps: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -174,6 +177,7 @@ _RANGES: dict[str, Range] = {
     "horizon_s": Range(0.0, 5.0, _S),
     "debounce_samples": Range(1, 100, integer=True),
     "clear_violation_mps": MARGIN_MPS,
+    "gust_sd_mps": Range(0.0, 3.0, "m/s"),
     "stale_after_s": Range(0.0, AUTOPILOT_STALE_S, _S, lo_open=True),  # beyond: longer than PX4 flying itself
     "stale_periods": Range(0.0, 100.0, lo_open=True),
     "max_descent_mps": SPEED_MPS,

@@ -149,7 +149,7 @@ class MissionRunner:
         if req.wind_ned_mps is not None:
             sd = PRIOR_SD_MPS if req.wind_sd_mps is None else req.wind_sd_mps
             prior = WindEstimate(tuple(float(x) for x in req.wind_ned_mps), sd, "operator")
-        self.wind = WindSources.for_flight(req.profile.drag, req.profile.mass_kg, prior)
+        self.wind = WindSources.for_flight(req.profile.drag, req.profile.mass_kg, prior, self.cfg.guard.gust_sd_mps)
         self.ground = GroundEvidence()  # the arm and takeoff commands: "on the ground" needs evidence after them
         self.ground_alt_m = 0.0  # the estimate's height of the ground, as seen at arming
         self.ladder_run = LadderExecutor(self.ladder, self.cfg.abort, self.fl.rate_hz, self.limits.stale_after_s,

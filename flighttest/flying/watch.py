@@ -29,6 +29,7 @@ ARMED_PHASES = frozenset({Phase.ARM, Phase.TAKEOFF, Phase.CLIMB, Phase.SETTLE, P
 # the wind is estimated in flight, clear of the ground's reaction and the takeoff's ground effect
 WIND_PHASES = frozenset({Phase.TAKEOFF, Phase.CLIMB, Phase.SETTLE, Phase.STREAM, Phase.LAND, Phase.HOLD})
 WIND_MIN_HEIGHT_M = 0.5
+GUST_PHASES = frozenset({Phase.CLIMB, Phase.SETTLE, Phase.HOLD})
 WHERE = {Phase.ARM: " while arming", Phase.TAKEOFF: " during the takeoff", Phase.LAND: " while landing",
          Phase.HOLD: " in the hold after the flight"}  # fmt: skip
 
@@ -97,7 +98,8 @@ class FlightWatch:
         wind = self.wind()
         att_age = t - st.t_att if st.t_att is not None else math.inf
         s = gd.GuardSample(t, st.vn_mps, st.ve_mps, st.vd_mps, *st.q, st.alt_m - host.ground_alt_m, *wind.ned_mps,
-                           *acc, wind_radius_mps=wind.radius_mps, att_age_s=att_age)  # fmt: skip
+                           *acc, wind_radius_mps=wind.radius_mps, att_age_s=att_age,
+                           updraft_mps=wind.updraft_mps)  # fmt: skip
         # below the floor is normal on the ground and in takeoff/landing: there the guard judges the rest
         self.guard.floor_active = host.floor_active
         d = self.guard.on_sample(s)
@@ -136,7 +138,9 @@ class FlightWatch:
         host = self.host
         st = host.link.state
         if host.phase in WIND_PHASES and st.in_air and st.alt_m - host.ground_alt_m > WIND_MIN_HEIGHT_M:
-            host.wind.on_imu(t, st)  # across the thrust axis the IMU feels the air's drag: the wind
+            # across the thrust axis the IMU feels the air's drag: the wind; its spread while the vehicle holds
+            # still, the gusts (the descent's manoeuvres move the estimate too)
+            host.wind.on_imu(t, st, measure_gusts=host.phase in GUST_PHASES)
         for d in (self.guard.on_rates(t, *st.rates_rps), self.guard.on_vertical_accel(t, st.accel_frd_mps2[2])):
             if d is not None:
                 self._logged(d)

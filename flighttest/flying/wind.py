@@ -12,13 +12,21 @@ The fused wind is the inverse-variance mean, and its uncertainty carries the est
 (the variance of the mixture), so two sources that contradict each other widen the guard's margin rather
 than narrow it. The guard judges the worst air within ``WIND_COVERAGE_SIGMAS`` of it
 (``flighttest.model.frames.worst_blade_velocity_mps``).
+
+No estimator reports the air's vertical motion, and an updraft moves ``w`` one for one. The guard allows an
+updraft of ``UPDRAFT_SIGMAS`` × the gusts' 1 σ: the larger of the operator's (``[guard] gust_sd_mps``) and
+``GustMeter``'s, the spread of flighttest's own horizontal estimate while the vehicle holds still (climb,
+settle, hover; not the descent, whose manoeuvres move the estimate too) less the spread it shows in steady air.
+That measure sees only the slow part of the gusts, which the estimate follows: on the fake it covered 37-91 % of
+the updrafts (bench/RESULTS.md, "Updrafts in the guard"); on a gusty day the operator's figure is the guard's.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -37,6 +45,15 @@ PRIOR_SD_MPS = 1.0  # a wind measured on the ground, at the vehicle's height: sh
 MIN_SD_MPS = 0.05  # no estimate of the wind is better than this
 UNKNOWN_SD_MPS = 1.0  # no drag model, no prior, no report: calm assumed, this unsure
 FRESH_STATE_S = 0.1  # a specific-force sample is paired only with a velocity and attitude this fresh
+# the gusts: the spread of flighttest's own estimate over the last GUST_WINDOW_S of its settled samples (its
+# 1 σ below GUST_SETTLED_SD_MPS: not the converging start), less GUST_FLOOR_MPS, above the most it spread in
+# still or steady air (0.002-0.043 m/s on both SITLs and the fakes); the guard allows an updraft of
+# UPDRAFT_SIGMAS × that (one-sided 97.5 %; bench/RESULTS.md, "Updrafts in the guard")
+GUST_WINDOW_S = 5.0
+GUST_SETTLED_SD_MPS = 0.3
+GUST_FLOOR_MPS = 0.05
+GUST_MIN_SAMPLES = 25
+UPDRAFT_SIGMAS = 1.96
 
 
 @dataclass(frozen=True)
@@ -44,15 +61,21 @@ class WindEstimate:
     ned_mps: tuple[float, float, float]
     sd_mps: float  # horizontal, 1 σ per axis
     source: str
+    gust_sd_mps: float = 0.0  # the gusts' 1 σ (GustMeter): the updraft the guard allows
 
     @property
     def radius_mps(self) -> float:
         """How far from ``ned_mps`` the guard looks for the worst air."""
         return WIND_COVERAGE_SIGMAS * self.sd_mps
 
+    @property
+    def updraft_mps(self) -> float:
+        """The updraft the guard allows: no estimator reports one."""
+        return UPDRAFT_SIGMAS * self.gust_sd_mps
+
     def describe(self) -> dict[str, object]:
         return {"wind_ned_mps": [round(x, 3) for x in self.ned_mps], "wind_sd_mps": round(self.sd_mps, 3),
-                "wind_source": self.source}  # fmt: skip
+                "wind_source": self.source, "gust_sd_mps": round(self.gust_sd_mps, 3)}  # fmt: skip
 
 
 def fuse(estimates: Sequence[WindEstimate]) -> WindEstimate:
@@ -98,31 +121,64 @@ class FlightState(Protocol):
 
 
 @dataclass
+class GustMeter:
+    """The gusts' 1 σ from the spread of flighttest's own wind estimate while the vehicle holds still."""
+
+    window_s: float = GUST_WINDOW_S
+    samples: deque = field(default_factory=deque)  # (t_s, wn_mps, we_mps)
+
+    def add(self, t_s: float, wn_mps: float, we_mps: float) -> None:
+        self.samples.append((t_s, wn_mps, we_mps))
+        while self.samples and self.samples[0][0] < t_s - self.window_s:
+            self.samples.popleft()
+
+    @property
+    def sd_mps(self) -> float:
+        """The worse axis's standard deviation over the window less ``GUST_FLOOR_MPS`` (0 with too few samples:
+        the wind's own uncertainty covers a vehicle that has not yet held still)."""
+        if len(self.samples) < GUST_MIN_SAMPLES:
+            return 0.0
+        a = np.asarray(self.samples, float)
+        return max(float(max(a[:, 1].std(), a[:, 2].std())) - GUST_FLOOR_MPS, 0.0)
+
+
+@dataclass
 class WindSources:
     """The estimates available to one flight; ``current`` fuses those valid now."""
 
     prior: WindEstimate | None = None  # the operator's
     estimator: WindFilter | None = None  # flighttest's own (None: the profile has no drag model)
     unknown_sd_mps: float = UNKNOWN_SD_MPS
+    gusts: GustMeter = field(default_factory=GustMeter)
+    stated_gust_sd_mps: float = 0.0  # the operator's (``[guard] gust_sd_mps``): the gusts are never less
 
     @classmethod
-    def for_flight(cls, drag: DragModel | None, mass_kg: float, prior: WindEstimate | None) -> WindSources:
+    def for_flight(cls, drag: DragModel | None, mass_kg: float, prior: WindEstimate | None,
+                   gust_sd_mps: float = 0.0) -> WindSources:  # fmt: skip
         estimator = None
         if drag is not None:
             estimator = WindFilter(drag, mass_kg)
             if prior is not None:  # the filter starts from the operator's wind, so the prior counts once
                 estimator.seed(prior.ned_mps[0], prior.ned_mps[1], prior.sd_mps)
-        return cls(prior, estimator)
+        return cls(prior, estimator, stated_gust_sd_mps=gust_sd_mps)
 
-    def on_imu(self, t_s: float, st: FlightState) -> None:
+    @property
+    def gust_sd_mps(self) -> float:
+        """The gusts' 1 σ: the larger of the operator's and the measured."""
+        return max(self.stated_gust_sd_mps, self.gusts.sd_mps)
+
+    def on_imu(self, t_s: float, st: FlightState, measure_gusts: bool = False) -> None:
         """A specific-force sample, while the vehicle flies (the caller judges that): into the filter,
-        paired with the latest velocity and attitude if both are fresh."""
+        paired with the latest velocity and attitude if both are fresh; with ``measure_gusts`` (the vehicle
+        holds still) its estimate into the gust meter once it has settled."""
         f = self.estimator
         if f is None or st.t_posvel is None or st.t_att is None:
             return
         if t_s - st.t_posvel > FRESH_STATE_S or t_s - st.t_att > FRESH_STATE_S:
             return
         f.update(t_s, (st.vn_mps, st.ve_mps, st.vd_mps), st.q, st.accel_frd_mps2)
+        if measure_gusts and f.samples and f.sd_mps < GUST_SETTLED_SD_MPS:
+            self.gusts.add(t_s, f.wn_mps, f.we_mps)
 
     def own(self, now_s: float) -> WindEstimate | None:
         """flighttest's estimate, its uncertainty grown by the time since its last sample."""
@@ -137,8 +193,8 @@ class WindSources:
         own = self.own(now_s)
         found = [e for e in (own, autopilot_report(st, now_s), None if own else self.prior) if e is not None]
         if not found:
-            return WindEstimate((0.0, 0.0, 0.0), self.unknown_sd_mps, "assumed calm")
-        return fuse(found)
+            return WindEstimate((0.0, 0.0, 0.0), self.unknown_sd_mps, "assumed calm", self.gust_sd_mps)
+        return replace(fuse(found), gust_sd_mps=self.gust_sd_mps)
 
 
 # -- the plan in the wind that blows ---------------------------------------------------------------------
@@ -147,7 +203,7 @@ class WindSources:
 def plan_margin_in_wind(traj: Trajectory, region: GuardRegion, drag: DragModel | None, mass_kg: float,
                         wind: WindEstimate) -> tuple[float, float]:  # fmt: skip
     """The plan's smallest guard margin (m/s) and its time (s, from the plan's start) in this wind, at the
-    worst air its uncertainty allows, as the guard will judge it: the air-relative velocity, and the disk
+    worst air its uncertainty and gusts allow, as the guard will judge it: the air-relative velocity, and the disk
     tilted as the plan's acceleration *and the drag of that air* need (thrust along −z_body balances
     both), whatever attitude the plan was made with."""
     df = traj.df
@@ -162,7 +218,8 @@ def plan_margin_in_wind(traj: Trajectory, region: GuardRegion, drag: DragModel |
     w = np.einsum("ij,ij->i", v_air, z_b)
     u = np.linalg.norm(v_air - w[:, None] * z_b, axis=1)
     tilt_sin = np.hypot(z_b[:, 0], z_b[:, 1])
-    margin = np.asarray(region.margin(*worst_blade_velocity_mps(w, u, tilt_sin, wind.radius_mps)), float)
+    margin = np.asarray(region.margin(*worst_blade_velocity_mps(w, u, tilt_sin, wind.radius_mps, wind.updraft_mps)),
+                        float)  # fmt: skip
     i = int(np.argmin(margin))
     return float(margin[i]), float(df["t_s"].iloc[i] - df["t_s"].iloc[0])
 

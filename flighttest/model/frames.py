@@ -137,12 +137,16 @@ def disk_tilt_sin(qw: FloatOrArray, qx: FloatOrArray, qy: FloatOrArray, qz: Floa
 
 
 def worst_blade_velocity_mps(
-    w_mps: FloatOrArray, u_mps: FloatOrArray, tilt_sin: FloatOrArray, wind_radius_mps: FloatOrArray
+    w_mps: FloatOrArray, u_mps: FloatOrArray, tilt_sin: FloatOrArray, wind_radius_mps: FloatOrArray,
+    updraft_mps: FloatOrArray = 0.0,
 ) -> tuple[FloatOrArray, FloatOrArray]:  # fmt: skip
-    """``(w, u)`` as bad as a horizontal wind anywhere within ``wind_radius_mps`` of the one assumed can make
-    them: a horizontal wind error δ moves ``w`` by at most ``sin(tilt)·|δ|`` and ``u`` by at most ``|δ|``.
-    Both bounds at once may be more than one δ can do: pessimistic by design, never optimistic."""
-    return w_mps + tilt_sin * wind_radius_mps, np.maximum(u_mps - wind_radius_mps, 0.0)
+    """``(w, u)`` as bad as a horizontal wind anywhere within ``wind_radius_mps`` of the one assumed, and an
+    updraft up to ``updraft_mps`` (which no autopilot reports), can make them: a horizontal wind error δ moves
+    ``w`` by at most ``sin(tilt)·|δ|`` and ``u`` by at most ``|δ|``; an updraft ``a`` moves ``w`` by at most
+    ``a`` and ``u`` by at most ``sin(tilt)·a``. All the bounds at once may be more than one air can do:
+    pessimistic by design, never optimistic."""
+    return (w_mps + tilt_sin * wind_radius_mps + updraft_mps,
+            np.maximum(u_mps - wind_radius_mps - tilt_sin * updraft_mps, 0.0))  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
