@@ -81,7 +81,7 @@ def test_in_3_mps_of_wind_the_descent_is_flown_and_the_air_never_entered_the_reg
     w, u = blade_velocity_mps(*(st[c].to_numpy(float) for c in ("vn_mps", "ve_mps", "vd_mps", "qw", "qx", "qy", "qz",
                                                                  "wind_n_mps", "wind_e_mps")), wd)  # fmt: skip
     if not gust:
-        end = next(e["unix_s"] for e in events(s["log_dir"]) if e["event"] == "stream_end")
+        end = next((e["unix_s"] for e in events(s["log_dir"]) if e["event"] == "stream_end"), math.inf)
         assert (g.loc[g["unix_s"] <= end, "gust_sd_mps"].fillna(0.0) == 0.0).all()  # steady air: no gusts read
         assert np.allclose(w, st["w_mps"], atol=2e-3) and np.allclose(u, st["u_mps"], atol=2e-3)
     margin = np.asarray(prof.guard_region(margin_mps=0.0).margin(w, u))
