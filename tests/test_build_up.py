@@ -176,6 +176,32 @@ def test_the_guard_over_the_descent_only():
     assert guard_over(g, 0.0, 3.0) == (-0.1, 2)
 
 
+def test_the_tracking_error_is_judged_on_the_logs_own_clock(tmp_path):
+    """flighttest's clock starts with its process, the log's with its first state sample: on ArduCopter SITL the
+    EKF's start-up put 41.6 s between them, and the tracking was judged over samples that did not exist."""
+    from synthetic import UNIX0, SyntheticFlight, write_tlog
+
+    flight = SyntheticFlight(duration_s=20.0, descents=[(10.0, 5.0, 2.5)])
+    write_tlog(flight, tmp_path / "flight.tlog")
+    t = np.arange(10.0, 12.5 + 1e-9, 0.02)
+    s = flight.states(t)
+    plan = pd.DataFrame({"t_s": t - 10.0, "n_m": s["n"] - s["n"][0], "e_m": s["e"] - s["e"][0],
+                         "d_m": s["d"] - s["d"][0], "vn_mps": s["vn"], "ve_mps": s["ve"], "vd_mps": s["vd"]})
+    plan.to_csv(tmp_path / "trajectory.csv", index=False)
+    late_s = 41.6  # flighttest's clock at the log's first sample
+    events = [{"t_s": late_s + 10.0, "unix_s": UNIX0 + 10.0, "event": "stream_start",
+               "origin_ned": [float(s["n"][0]), float(s["e"][0]), float(s["d"][0])]},
+              {"t_s": late_s + 12.5, "unix_s": UNIX0 + 12.5, "event": "stream_end"}]  # fmt: skip
+    (tmp_path / "events.jsonl").write_text("".join(json.dumps(e) + "\n" for e in events), encoding="utf-8")
+    pd.DataFrame({"t_s": late_s + t, "unix_s": UNIX0 + t, "verdict": "ok", "margin_mps": 0.3,
+                  "action": "none"}).to_csv(tmp_path / "guard.csv", index=False)  # fmt: skip
+    e = flight_evidence(tmp_path)
+    assert e.min_margin_mps == pytest.approx(0.3)
+    assert e.tracking_mps is not None and e.tracking_mps < 0.05  # flown as planned
+    plan.assign(vd_mps=plan["vd_mps"] + 0.2).to_csv(tmp_path / "trajectory.csv", index=False)
+    assert flight_evidence(tmp_path).tracking_mps == pytest.approx(0.2, abs=0.05)
+
+
 def test_a_folder_without_a_guard_log_is_refused(tmp_path):
     with pytest.raises(FlighttestError, match="not a flighttest flight folder"):
         flight_evidence(tmp_path)
