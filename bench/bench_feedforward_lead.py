@@ -27,6 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 from flighttest.analysis.margin_evidence import flight_evidence  # noqa: E402
 from flighttest.model.aero import G_MPS2  # noqa: E402
+from flighttest.model.frames import quat_to_rotmat  # noqa: E402
 
 STEP_S = 0.01
 LAGS_S = np.arange(0.0, 0.61, STEP_S)
@@ -43,10 +44,10 @@ def events_of(folder: Path) -> list[dict]:
 
 
 def tilt_acceleration_ne(q_wxyz: np.ndarray) -> np.ndarray:
-    """The horizontal acceleration the lean makes while the thrust carries the weight: −g · z_ne / z_d."""
-    w, x, y, z = np.asarray(q_wxyz, float).T
-    zn, ze, zd = 2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)
-    return np.stack([-G_MPS2 * zn / zd, -G_MPS2 * ze / zd], axis=1)
+    """The horizontal acceleration the lean makes while the thrust carries the weight: −g · z_ne / z_d of the
+    body's z axis in NED."""
+    z_ned = quat_to_rotmat(q_wxyz)[:, :, 2]
+    return -G_MPS2 * z_ned[:, :2] / z_ned[:, 2:3]
 
 
 def tilt_lag_s(folder: Path, t0_s: float, t1_s: float) -> float:
