@@ -114,6 +114,13 @@ def test_campaign_on_the_arducopter_fake_runs_all_six_steps_as_on_its_sitl(tmp_p
     rows = assert_build_up(out, s, most=2)
     assert all(r["estimate_mps"] is not None for m in rows for r in rows[m])
     assert all(step["status"] == "done" for step in steps.values()), steps
-    assert s["vehicle"] == VEHICLE and s["onset_found"] is False and s["speedup_helix_vs_vertical"] > 1.0
+    assert s["vehicle"] == VEHICLE and s["onset_found"] is False
+    # like for like, the first flights (the config's margins): the helix descends faster (15.8-15.9 s against
+    # 16.8). The kept flights need not say so: the helix's next plan may not converge while the vertical narrows
+    # to 10.9 s (bench/RESULTS.md, "A flaky assertion found in the same review")
+    first = {m: json.loads((out / "build_up" / f"{m}.json").read_text())["flights"][0]["record"]["descent_time_s"]
+             for m in ("vertical", "helix")}  # fmt: skip
+    assert first["helix"] < first["vertical"], first
+    assert s["speedup_helix_vs_vertical"] == pytest.approx(s["vertical_descent_s"] / s["helix_descent_s"])
     assert [f["step"] for f in s["flights"]] == ["vertical", "helix"]
     assert all(f["outcome"] == "completed" and f["guard_aborts"] == 0 for f in s["flights"])
