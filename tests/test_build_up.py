@@ -23,11 +23,13 @@ from flighttest.campaign.build_up import (
     MarginBudget,
     best_flight,
     first_budget,
+    halfway_budget,
     next_budget,
     stop_reason,
 )
 from flighttest.errors import FlighttestError
 from flighttest.flying.missions_config import BuildUpConfig, mission_config_from_dict
+from flighttest.model.trajectory import Trajectory
 
 RULES = BuildUpConfig()
 KEY = "extra_margin_mps"
@@ -246,3 +248,73 @@ def test_a_resume_goes_on_only_from_an_unfinished_build_up_of_the_same_plan(tmp_
     assert _build_up_so_far(path, "abc") == []  # finished: a new build-up
     path.write_text("{not json", encoding="utf-8")
     assert _build_up_so_far(path, "abc") == []
+
+
+def test_halfway_is_between_the_last_flights_margin_and_room_and_the_asked_ones():
+    last = BuildUpFlight(1, MarginBudget(KEY, 0.4, expanded=(("accel_fraction", 0.2),)), evidence(), "plans/v-1.csv")
+    asked = MarginBudget(KEY, 0.2, (), "the evidence", (("accel_fraction", 0.3),))
+    half = halfway_budget(asked, last, "the planner did not converge (Maximum_Iterations_Exceeded)")
+    assert half.margin_mps == pytest.approx(0.3) and dict(half.expanded) == {"accel_fraction": pytest.approx(0.25)}
+    assert half.note.startswith("halfway from flight 1's: no plan for 0.200 m/s") and "Maximum_Iterations" in half.note
+    # nothing narrower, no more room: halfway would fly flight 1 again
+    assert halfway_budget(MarginBudget(KEY, 0.398, expanded=(("accel_fraction", 0.2),)), last, "x") is None
+
+
+class _Vertical:
+    """A mission module whose planner finds no plan for the margins in ``refused`` (IPOPT out of iterations)."""
+
+    def __init__(self, profile, refused):
+        self.profile, self.refused, self.asked = profile, refused, []
+
+    def plan(self, profile, cfg):
+        from flighttest.planner.export import vertical_trajectory
+        from flighttest.planner.vertical import plan_vertical
+
+        margin = round(cfg.plan[KEY], 4)
+        self.asked.append(margin)
+        if margin in self.refused:
+            raise FlighttestError("the planner did not converge (Maximum_Iterations_Exceeded)")
+        return vertical_trajectory(plan_vertical(profile, height_m=2.0), profile.name, profile.mass_kg)
+
+
+@pytest.mark.parametrize("halfway_plans", [True, False])
+def test_a_flight_the_planner_has_no_plan_for_flies_halfway_once(tmp_path, monkeypatch, halfway_plans):
+    # the ArduCopter fake's campaign: the helix's second plan ran out of iterations and the build-up kept the first
+    import flighttest.analysis.margin_evidence as me
+    import flighttest.campaign.steps as steps
+    from flighttest.campaign.state import CampaignState
+    from flighttest.model.profiles import load_profile
+
+    monkeypatch.setenv("FLIGHTTEST_CACHE", str(tmp_path / "cache"))
+    state = CampaignState.open(tmp_path / "c", "x500")
+    steps.write_configs(state.dir)
+    state.dir.plans.mkdir(parents=True, exist_ok=True)
+    said: list[str] = []
+    ctx = steps.StepContext(state=state, vehicle="x500", connect=lambda: "udpout://127.0.0.1:9", print_fn=said.append,
+                            build_up=3)  # fmt: skip
+    prof = load_profile("x500")
+    flown: list[float] = []
+
+    def fly(ctx, step, profile, cfg, traj, path, wind_plans, replan):
+        flown.append(round(cfg.plan[KEY], 4))
+        return {"log_dir": f"logs/{len(flown)}", "outcome": "completed", "abort_reason": None}
+
+    # each flight used 0.05 m/s of its plan's 0.35 and ran 1 s faster than the last
+    monkeypatch.setattr(steps, "_flight", fly)
+    monkeypatch.setattr(me, "flight_evidence",
+                        lambda d: evidence(least=0.30, plan=0.35, estimate=0.02, h2h=12.0 - len(flown)))  # fmt: skip
+    module = _Vertical(prof, refused={0.175})  # 0.35 narrowed by half (max_narrow_fraction)
+    if not halfway_plans:
+        module.refused.add(0.2625)
+    first = tmp_path / "vertical.csv"
+    module.plan(prof, ctx.config("vertical")).save(first)
+    module.asked.clear()
+    out = steps._build_up(ctx, "vertical", prof, module, Trajectory.load(first, prof), first, [])
+    if halfway_plans:
+        # flight 3 narrows from flight 2's margin, the halfway one, as from any other
+        assert module.asked == [0.175, 0.2625, 0.1312] and flown == [0.35, 0.2625, 0.1312]
+        assert [r["margin_mps"] for r in out["build_up"]] == flown and out["build_up_best"] == 3
+        assert any("halfway from flight 1's: no plan for 0.175 m/s" in str(s) for s in said)
+    else:  # halfway once: no plan there either ends the build-up with the flights so far
+        assert module.asked == [0.175, 0.2625] and flown == [0.35]
+        assert out["build_up_stop"].startswith("no plan for flight 2's margins")

@@ -18,7 +18,9 @@ The next margin is their sum, never below ``floor_mps`` and never more than ``ma
 narrower than the last. The tracking room the plan leaves the autopilot (``EXPAND_KEYS``: the helix's rate
 fraction and thrust rate, the vertical's acceleration fraction) widens by ``expand_fraction`` after a flight
 that completed with the guard silent and whose least margin kept the estimate's error and the reserve.
-The build-up stops at the first of: a flight that did not complete, a guard that said anything over the
+When the planner finds no plan for the next margin, the flight
+plans halfway from the last one's (:func:`halfway_budget`), once. The build-up stops at the first of: a flight
+that did not complete, a guard that said anything over the
 descent, a flight not ``min_gain_fraction`` faster hover to hover than the one before, N flights, or nothing
 left to change (the margin at the floor or the evidence's, no more room earned). The campaign keeps the
 fastest flight that completed with the guard silent.
@@ -181,6 +183,20 @@ def next_budget(key: str, flights: list[BuildUpFlight], cfg: BuildUpConfig,
         room = {k: min(cap, room[k] * (1.0 + cfg.expand_fraction)) for k, cap in (caps or {}).items() if k in room}
         room = {**dict(last.budget.expanded), **room}
     return MarginBudget(key, margin, tuple(terms), note, tuple(sorted(room.items())))
+
+
+def halfway_budget(budget: MarginBudget, last: BuildUpFlight, why: str) -> MarginBudget | None:
+    """Halfway from ``last``'s margin and tracking room to ``budget``'s: the next flight's plan when the planner
+    found none for ``budget`` (IPOPT out of iterations on the ArduCopter fake's helix, bench/RESULTS.md "The
+    build-up"). None when halfway is ``last``'s own: nothing new to fly."""
+    before = dict(last.budget.expanded)
+    margin = 0.5 * (last.margin_mps + budget.margin_mps)
+    room = tuple((k, 0.5 * (before.get(k, v) + v)) for k, v in budget.expanded)
+    wider_room = any(v > before.get(k, v) * (1 + 1e-6) for k, v in room)
+    if margin >= last.margin_mps - SAME_MPS and not wider_room:
+        return None
+    return MarginBudget(budget.key, margin, budget.terms, f"halfway from flight {last.k}'s: no plan for "
+                        f"{budget.margin_mps:.3f} m/s ({why})", room)  # fmt: skip
 
 
 def stop_reason(flights: list[BuildUpFlight], upcoming: MarginBudget, most: int, cfg: BuildUpConfig) -> str | None:

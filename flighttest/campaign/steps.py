@@ -29,6 +29,7 @@ from flighttest.campaign.build_up import (
     MarginBudget,
     best_flight,
     first_budget,
+    halfway_budget,
     next_budget,
     stop_reason,
 )
@@ -283,6 +284,7 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
     fixed = mission == "helix" and bool(cfg0.plan.get("trajectory"))  # a planned file flies as planned
     # resumed: the flights so far may already end it (a smaller N this time)
     why = stop_reason(flights, budget, ctx.build_up, rules) if flights else None
+    halved = False  # this flight's plan is already the halfway one
     while why is None:
         k = len(flights) + 1
         cfg = cfg0 if k == 1 else dataclasses.replace(cfg0, plan={**cfg0.plan, **budget.plan_changes()})
@@ -295,7 +297,11 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
             try:
                 traj = with_optimum(module.plan(profile, cfg), profile, ctx.print_fn)
                 wind_plans = _wind_plans(ctx, module, profile, mission, cfg)
-            except FlighttestError as exc:  # no plan for these margins: the flights so far are the build-up
+            except FlighttestError as exc:  # no plan for these margins: halfway once, else the flights so far
+                half = None if halved else halfway_budget(budget, flights[-1], str(exc))
+                if half is not None:
+                    budget, halved = half, True
+                    continue
                 why = f"no plan for flight {k}'s margins: {exc}"
                 ctx.print_fn(f"build-up {mission}: stops: {why}")
                 break
@@ -307,6 +313,7 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
             raise StepFailed(failure_line(mission, rec), rec)  # the first flight is the campaign's single flight
         evidence = flight_evidence(rec["log_dir"]) if rec.get("log_dir") else no_evidence(rec.get("outcome"))
         flights.append(BuildUpFlight(k, budget, evidence, str(path), rec))
+        halved = False
         budget = next_budget(key, flights, rules, caps)
         why = ("the helix flies a planned file ([plan] trajectory): nothing to narrow" if fixed
                else stop_reason(flights, budget, ctx.build_up, rules))  # fmt: skip
