@@ -18,12 +18,11 @@ The next margin is their sum, never below ``floor_mps`` and never more than ``ma
 narrower than the last. The tracking room the plan leaves the autopilot (``EXPAND_KEYS``: the helix's rate
 fraction and thrust rate, the vertical's acceleration fraction) widens by ``expand_fraction`` after a flight
 that completed with the guard silent and whose least margin kept the estimate's error and the reserve.
-When the planner finds no plan for the next margin, the flight
-plans halfway from the last one's (:func:`halfway_budget`), once. The build-up stops at the first of: a flight
-that did not complete, a guard that said anything over the
-descent, a flight not ``min_gain_fraction`` faster hover to hover than the one before, N flights, or nothing
-left to change (the margin at the floor or the evidence's, no more room earned). The campaign keeps the
-fastest flight that completed with the guard silent.
+Where the planner finds no plan for the next margins, that flight plans halfway from the last one's
+(:func:`halfway_budget`), once. The build-up stops at the first of: a flight that did not complete, a guard
+that said anything over the descent, a flight not ``min_gain_fraction`` faster hover to hover than the one
+before, N flights, no plan even halfway, or nothing left to change (the margin at the floor or the evidence's,
+no more room earned). The campaign keeps the fastest flight that completed with the guard silent.
 
 Which ``[plan]`` key the margin is: :data:`BUILD_UP_KEYS`. Pure logic: the flying is the campaign's
 (``flighttest.campaign.steps``).
