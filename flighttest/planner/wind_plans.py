@@ -113,8 +113,9 @@ def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_
                     base.parent.mkdir(parents=True, exist_ok=True)
                     if stopped and times < TIMEOUTS_BEFORE_LEFT_OUT:
                         timed_out.write_text(f"{times}\n")
-                    else:
+                    else:  # deleting .failed then gives it its tries again
                         failed.write_text(f"{exc} after {SOLVE_MAX_S:g} s, {times} times\n" if stopped else f"{exc}\n")
+                        timed_out.unlink(missing_ok=True)
                 continue
             try:
                 base.parent.mkdir(parents=True, exist_ok=True)
