@@ -16,17 +16,23 @@ A block without a marker fails the fast test below: no command in the README goe
 
 from __future__ import annotations
 
+import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import pytest
+import tomli_w
 
+from flighttest.flying.mission_scripts import MISSIONS, shipped_dir
 from flighttest.flying.params_file import read_params
+from test_fly_missions import CI_STALE_PERIODS
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -135,6 +141,20 @@ def _env(tmp_path: Path) -> dict[str, str]:
     return env
 
 
+def _ci_missions(tmp_path: Path) -> Path:
+    """The shipped missions in a user folder (FLIGHTTEST_MISSIONS), each with the CI stale-telemetry
+    allowance: the field's 0.25 s rule aborted a README flight on a busy 2-core box (257 ms without
+    telemetry, 2026-12-07). What the blocks type stays as the README shows it."""
+    folder = tmp_path / "ci-missions"
+    folder.mkdir()
+    for name in MISSIONS.values():
+        shutil.copy(shipped_dir() / f"{name}.py", folder)
+        cfg = tomllib.loads((shipped_dir() / f"{name}.toml").read_text(encoding="utf-8"))
+        cfg["guard"]["stale_periods"] = CI_STALE_PERIODS
+        (folder / f"{name}.toml").write_text(tomli_w.dumps(cfg), encoding="utf-8")
+    return folder
+
+
 @pytest.mark.flight
 @pytest.mark.timeout(900)
 @pytest.mark.parametrize("index", range(len(run_blocks())), ids=lambda i: f"run-block-{i + 1}")
@@ -146,7 +166,8 @@ def test_the_readme_block_runs_against_the_fake(index, readme_fake, tmp_path):
     work.mkdir()
     t0 = time.monotonic()
     argv = [sys.executable, "-c", block] if lang == "python" else ["bash", "-e", "-o", "pipefail", "-c", block]
-    proc = subprocess.run(argv, cwd=work, env=_env(tmp_path), capture_output=True, text=True, timeout=840)
+    env = {**_env(tmp_path), "FLIGHTTEST_MISSIONS": str(_ci_missions(tmp_path))}
+    proc = subprocess.run(argv, cwd=work, env=env, capture_output=True, text=True, timeout=840)
     assert proc.returncode == 0, f"exit {proc.returncode} after {time.monotonic() - t0:.0f} s\n{block}\n" + (
         proc.stdout[-4000:] + proc.stderr[-4000:]
     )
@@ -155,7 +176,11 @@ def test_the_readme_block_runs_against_the_fake(index, readme_fake, tmp_path):
     assert not (home / ".config" / "flighttest" / "vehicles").exists()  # the user's profiles untouched
     if lang == "python":  # one flight: its outcome printed, its folder under logs/
         assert proc.stdout.strip().splitlines()[-1].split()[0] == "completed", proc.stdout  # the block's print
-        assert [p.name.split("-")[-1] for p in (work / "logs").iterdir()] == ["helix"]
+        (flight,) = (work / "logs").iterdir()
+        assert flight.name.split("-")[-1] == "helix"
+        events = [json.loads(line) for line in (flight / "events.jsonl").read_text().splitlines() if line.strip()]
+        rule = next(e for e in events if e["event"] == "stale_rule")
+        assert rule["offboard_s"] > 0.25, rule  # the CI allowance (_ci_missions) reached the flight
     elif "flighttest params" in block:  # saved, one change applied, the saved value restored
         assert read_params(work / "before.params")["MPC_Z_VEL_MAX_DN"] == 1.5
         assert proc.stdout.count("set 1 of 1") == 2, proc.stdout  # apply 1.2, restore 1.5
