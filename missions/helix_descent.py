@@ -6,7 +6,8 @@ Plans the helix for the vehicle (or loads a planned file given as ``plan.traject
 rates and thrust below the vehicle's limits, descent below PX4's ``MPC_Z_VEL_MAX_DN``, so the
 autopilot's feedback has room and the guard stays silent on a well-flown helix. A profile with an
 ``[autopilot]`` table (``arducopter_sitl``: ArduCopter's GUIDED limits) also keeps the helix's
-acceleration, descent and climb within those limits. Planning takes a few seconds of IPOPT.
+acceleration, descent and climb within those limits. Planning takes a few seconds of IPOPT, once: the plans
+are kept in the plan cache (``flighttest.planner.plan_cache``).
 
     flighttest fly helix --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
 """
@@ -20,6 +21,7 @@ from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import Trajectory
 from flighttest.planner.export import helix_trajectory
 from flighttest.planner.helix import solve_helix
+from flighttest.planner.plan_cache import cached_plan
 from flighttest.planner.tracking import TrackingMargin, helix_problem_for_flight
 from flighttest.planner.wind_plans import SOLVE_MAX_S, helix_plans_for_winds, wind_speeds
 
@@ -31,19 +33,24 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
     hp = HelixPlanConfig.from_table(p)
     if hp.trajectory:
         return Trajectory.load(Path(cfg.path or CONFIG).parent / hp.trajectory, profile)
-    problem = helix_problem_for_flight(
-        profile,
-        height_m=hp.descent_m,
-        radius_m=hp.radius_m,
-        margin=TrackingMargin.from_plan(p),
-        n_intervals=hp.n_intervals,
-        n_coarse=hp.n_coarse,
-        wind_radius_mps=hp.calm_wind_radius_mps,
-    )
-    sol = solve_helix(problem)
-    if not sol.success:
-        raise FlighttestError(f"helix planner did not converge ({sol.result.status})")
-    return helix_trajectory(sol, profile.name, profile.mass_kg, extra={"tracking_margin": dict(p)})
+
+    def solve() -> Trajectory:
+        problem = helix_problem_for_flight(
+            profile,
+            height_m=hp.descent_m,
+            radius_m=hp.radius_m,
+            margin=TrackingMargin.from_plan(p),
+            n_intervals=hp.n_intervals,
+            n_coarse=hp.n_coarse,
+            wind_radius_mps=hp.calm_wind_radius_mps,
+        )
+        sol = solve_helix(problem)
+        if not sol.success:
+            raise FlighttestError(f"helix planner did not converge ({sol.result.status})")
+        return helix_trajectory(sol, profile.name, profile.mass_kg, extra={"tracking_margin": dict(p)})
+
+    # seconds of IPOPT before every flight otherwise (8.5 s for arducopter_sitl): made once per profile and table
+    return cached_plan("helix-calm", profile, {"plan": dict(p)}, solve)
 
 
 def plans_for_wind(profile: VehicleProfile, cfg: MissionConfig, progress=lambda _: None) -> list[Trajectory]:

@@ -36,19 +36,27 @@ def fake_vehicle_factory(tmp_path):
         fake.stop()
 
 
+@pytest.fixture(scope="session", autouse=True)
+def plan_cache(tmp_path_factory, worker_id):
+    """The plan cache (flighttest.planner.plan_cache) of this session, shared by its workers and inherited by
+    the flights' processes (FLIGHTTEST_CACHE): never the user's own, which would hand the tests plans made
+    before them."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if worker_id != "master" else base
+    os.environ["FLIGHTTEST_CACHE"] = str(root / "flighttest-cache")
+    return root / "flighttest-cache"
+
+
 @pytest.fixture(scope="session")
-def helix_plans_for_wind(tmp_path_factory, worker_id):
+def helix_plans_for_wind(plan_cache, worker_id):
     """The helix mission's plans for the wind (flighttest.planner.wind_plans), made before the first flight
-    in a plan cache the session's workers share (FLIGHTTEST_CACHE, inherited by the flights' processes):
-    a minute of IPOPT per vehicle, once, outside any flight's timeout. Odd workers take the vehicles in the
-    other order, and each loads what the other planned (the cache's lock has it wait for a plan under way)."""
+    in the session's plan cache: a minute of IPOPT per vehicle, once, outside any flight's timeout. Odd
+    workers take the vehicles in the other order, and each loads what the other planned (the cache's lock
+    has it wait for a plan under way)."""
     from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
     from flighttest.flying.missions_config import load_mission_config
     from flighttest.model.profiles import load_profile
 
-    base = tmp_path_factory.getbasetemp()
-    root = base.parent if worker_id != "master" else base
-    os.environ["FLIGHTTEST_CACHE"] = str(root / "flighttest-cache")
     helix = load_mission_module("helix")
     cfg = load_mission_config(mission_config_path("helix"))
     odd = worker_id.removeprefix("gw").isdigit() and int(worker_id.removeprefix("gw")) % 2 == 1

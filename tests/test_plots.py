@@ -247,6 +247,8 @@ def test_plan_helix_plans_what_fly_helix_flies_and_paper_the_papers_problem(monk
     from flighttest.cli.plan import cmd_helix
 
     monkeypatch.chdir(tmp_path)
+    # a plan cache of its own: the mission's plan, made by another test, would be loaded and nothing solved
+    monkeypatch.setenv("FLIGHTTEST_CACHE", str(tmp_path / "cache"))
     cfg = load_mission_config(mission_config_path("helix"))
     flown = _problem_of(monkeypatch, lambda: load_mission_module("helix").plan(x500, cfg))
     planned = _problem_of(monkeypatch, lambda: cmd_helix(_plan_args()))

@@ -15,7 +15,6 @@ mission solves nothing. A plan the planner has no optimum for (the probe, a plan
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass
@@ -158,13 +157,9 @@ def solve(profile: VehicleProfile, q: dict[str, Any]) -> Optimum:
 
 
 def _cache_path(profile: VehicleProfile, q: dict[str, Any]):
-    from flighttest import __version__
-    from flighttest.planner.wind_plans import cache_dir
+    from flighttest.planner.plan_cache import cache_dir, cache_key
 
-    summary = {k: v for k, v in profile.summary().items() if k != "path"}
-    what = {"profile": summary, "question": q, "format": OPTIMUM_FORMAT, "flighttest": __version__}
-    key = hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:20]
-    return cache_dir() / f"optimum-{profile.name}-{key}.json"
+    return cache_dir() / f"optimum-{profile.name}-{cache_key(profile, {**q, 'format': OPTIMUM_FORMAT})}.json"
 
 
 def optimum_for(traj: Trajectory, profile: VehicleProfile, progress=lambda _: None) -> Optimum | None:
@@ -179,7 +174,8 @@ def optimum_for(traj: Trajectory, profile: VehicleProfile, progress=lambda _: No
         return None
     if q is None:
         return None
-    from flighttest.planner.wind_plans import WALL_TIME_STATUS, planning_lock
+    from flighttest.planner.plan_cache import planning_lock
+    from flighttest.planner.wind_plans import WALL_TIME_STATUS
 
     path = _cache_path(profile, q)
     with planning_lock(path):

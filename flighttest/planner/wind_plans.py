@@ -6,33 +6,26 @@ plan made for a wind of speed ``s`` from one direction serves that speed from an
 the vertical (``flighttest.flying.wind.rotate_plan``). Plans are made for a ladder of speeds up to the
 mission's ``max_wind_mps``, each keeping clear of the guard region for any wind within ``wind_radius_mps``
 of its own and with the disk tilted against the profile's drag (``flighttest.planner.tracking``), and
-kept in a cache keyed by everything they depend on: a second flight of the same mission plans nothing.
+kept in a cache keyed by everything they depend on (``flighttest.planner.plan_cache``): a second flight of the
+same mission plans nothing.
 """
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import json
-import os
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
-from flighttest import __version__
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import Trajectory
+from flighttest.planner.plan_cache import cache_dir, cache_key, planning_lock, save_quietly
 
 # Each IPOPT solve of a plan for the wind stops after this long: a wind the vehicle can barely serve can
 # otherwise take IPOPT thousands of slow iterations (arducopter_sitl, 5 m/s: bench/RESULTS.md, "Plans for
 # the wind"), and a ladder that would serve it no better is left without that rung.
 SOLVE_MAX_S = 20.0
 WALL_TIME_STATUS = "Maximum_WallTime_Exceeded"  # IPOPT's status for a solve SOLVE_MAX_S stopped
-
-
-def cache_dir() -> Path:
-    return Path(os.environ.get("FLIGHTTEST_CACHE", "~/.cache/flighttest")).expanduser() / "plans"
 
 
 def wind_speeds(max_wind_mps: float, step_mps: float) -> list[float]:
@@ -43,34 +36,9 @@ def wind_speeds(max_wind_mps: float, step_mps: float) -> list[float]:
     return [round(step_mps * (k + 1), 3) for k in range(n)]
 
 
-def _key(profile: VehicleProfile, plan: dict[str, Any], speed_mps: float, radius_mps: float) -> str:
-    # the profile's content, not where it lies: a campaign's copy of a vehicle plans as the original
-    summary = {k: v for k, v in profile.summary().items() if k != "path"}
-    what = {"profile": summary, "plan": plan, "speed_mps": speed_mps, "radius_mps": radius_mps,
-            "flighttest": __version__}  # fmt: skip
-    return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:20]
-
-
-@contextlib.contextmanager
-def planning_lock(base: Path) -> Iterator[None]:
-    """One process plans a key at a time: a second flighttest (a campaign's next step, another test) waits for
-    the first's plan and loads it instead of spending the same minute of IPOPT beside it."""
-    try:
-        import fcntl
-    except ImportError:  # Windows: no advisory locks, both plan
-        yield
-        return
-    try:
-        base.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(f"{base}.lock", os.O_CREAT | os.O_RDWR, 0o644)
-    except OSError:
-        yield
-        return
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        os.close(fd)  # closing releases the lock
+def question(plan: dict[str, Any], speed_mps: float, radius_mps: float) -> dict[str, Any]:
+    """What a plan for the wind depends on besides the profile and the code (``plan_cache.cache_key``)."""
+    return {"plan": plan, "speed_mps": speed_mps, "radius_mps": radius_mps}
 
 
 def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_mps: list[float], radius_mps: float,
@@ -82,7 +50,7 @@ def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_
     out = []
     root = cache_dir()
     for s in speeds_mps:
-        base = root / f"helix-{profile.name}-{_key(profile, plan, s, radius_mps)}"
+        base = root / f"helix-{profile.name}-{cache_key(profile, question(plan, s, radius_mps), solve)}"
         failed = base.parent / f"{base.name}.failed"
         timed_out = base.parent / f"{base.name}.timedout"
         with planning_lock(base):
@@ -114,11 +82,6 @@ def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_
                         failed.write_text(f"{exc}, twice, after {SOLVE_MAX_S:g} s each\n" if stopped else f"{exc}\n")
                         timed_out.unlink(missing_ok=True)
                 continue
-            try:
-                base.parent.mkdir(parents=True, exist_ok=True)
-                traj.save(base)
-            except OSError:
-                pass  # a cache that cannot be written plans again next time, nothing worse
+            save_quietly(traj, base)
             out.append(traj)
     return out
-
