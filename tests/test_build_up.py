@@ -318,3 +318,44 @@ def test_a_flight_the_planner_has_no_plan_for_flies_halfway_once(tmp_path, monke
     else:  # halfway once: no plan there either ends the build-up with the flights so far
         assert module.asked == [0.175, 0.2625] and flown == [0.35]
         assert out["build_up_stop"].startswith("no plan for flight 2's margins")
+
+
+def test_flights_after_a_preflight_that_found_other_limits_plan_within_them_once(tmp_path, monkeypatch):
+    # ArduCopter with a test day's parameter file: each build-up flight planned within the profile's limits, then
+    # its preflight read the vehicle's own and planned everything again (bench/RESULTS.md, "The build-up")
+    import dataclasses
+
+    import flighttest.analysis.margin_evidence as me
+    import flighttest.campaign.steps as steps
+    from flighttest.campaign.state import CampaignState
+    from flighttest.model.profiles import AutopilotLimits, load_profile
+
+    monkeypatch.setenv("FLIGHTTEST_CACHE", str(tmp_path / "cache"))
+    state = CampaignState.open(tmp_path / "c", "x500")
+    steps.write_configs(state.dir)
+    state.dir.plans.mkdir(parents=True, exist_ok=True)
+    ctx = steps.StepContext(state=state, vehicle="x500", connect=lambda: "udpout://127.0.0.1:9",
+                            print_fn=lambda _: None, build_up=3)  # fmt: skip
+    prof = load_profile("x500")
+    vehicle = dataclasses.replace(prof, autopilot=AutopilotLimits("PX4", accel_z_max_mps2=4.0))  # its own limits
+    module = _Vertical(prof, refused=set())
+    planned_for: list[AutopilotLimits | None] = []
+    plan = module.plan
+    module.plan = lambda profile, cfg: (planned_for.append(profile.autopilot), plan(profile, cfg))[1]
+    flown_with: list[AutopilotLimits | None] = []
+
+    def fly(ctx, step, profile, cfg, traj, path, wind_plans, replan):  # the preflight's part of it
+        if profile.autopilot != vehicle.autopilot:
+            replan(vehicle)
+        flown_with.append(vehicle.autopilot)
+        return {"log_dir": f"logs/{len(flown_with)}", "outcome": "completed", "abort_reason": None}
+
+    monkeypatch.setattr(steps, "_flight", fly)
+    monkeypatch.setattr(me, "flight_evidence",
+                        lambda d: evidence(least=0.3, plan=0.35, estimate=0.02, h2h=12 - len(flown_with)))  # fmt: skip
+    first = tmp_path / "vertical.csv"
+    plan(prof, ctx.config("vertical")).save(first)
+    out = steps._build_up(ctx, "vertical", prof, module, Trajectory.load(first, prof), first, [])
+    assert len(out["build_up"]) == 3 and flown_with == [vehicle.autopilot] * 3
+    # flight 1's preflight planned within the vehicle's limits; flights 2 and 3 planned within them at once
+    assert planned_for == [vehicle.autopilot] * 3

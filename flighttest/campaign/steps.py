@@ -285,6 +285,20 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
     # resumed: the flights so far may already end it (a smaller N this time)
     why = stop_reason(flights, budget, ctx.build_up, rules) if flights else None
     halved = False  # this flight's plan is already the halfway one
+    # the vehicle as the last preflight found it: where its own limits differed from the profile's, the flights
+    # after it plan within them at once instead of planning twice, once for the preflight to throw away
+    live = profile
+
+    def replanner(cfg: MissionConfig):
+        replan = _replanner(ctx, module, mission, cfg)
+
+        def recording(p: VehicleProfile) -> tuple[Trajectory, list[Trajectory]]:
+            nonlocal live
+            live = p
+            return replan(p)
+
+        return recording
+
     while why is None:
         k = len(flights) + 1
         cfg = cfg0 if k == 1 else dataclasses.replace(cfg0, plan={**cfg0.plan, **budget.plan_changes()})
@@ -295,8 +309,8 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
             ctx.print_fn(f"build-up {mission} flight {k}: {key} {budget.margin_mps:.3f} m/s ({budget.note}), "
                          f"{room}; planning …")
             try:
-                traj = with_optimum(module.plan(profile, cfg), profile, ctx.print_fn)
-                wind_plans = _wind_plans(ctx, module, profile, mission, cfg)
+                traj = with_optimum(module.plan(live, cfg), live, ctx.print_fn)
+                wind_plans = _wind_plans(ctx, module, live, mission, cfg)
             except FlighttestError as exc:  # no plan for these margins: halfway once, else the flights so far
                 half = None if halved else halfway_budget(budget, flights[-1], str(exc))
                 if half is not None:
@@ -308,7 +322,7 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
             traj.meta[BUDGET_KEY] = budget.to_dict()
             path = ctx.dir.plans / f"{mission}-build-up-{k}.csv"
             traj.save(path)
-        rec = _flight(ctx, mission, profile, cfg, traj, str(path), wind_plans, _replanner(ctx, module, mission, cfg))
+        rec = _flight(ctx, mission, live, cfg, traj, str(path), wind_plans, replanner(cfg))
         if k == 1 and rec["outcome"] not in FLIGHT_OK[mission]:
             raise StepFailed(failure_line(mission, rec), rec)  # the first flight is the campaign's single flight
         evidence = flight_evidence(rec["log_dir"]) if rec.get("log_dir") else no_evidence(rec.get("outcome"))
