@@ -49,7 +49,7 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
             raise FlighttestError(f"helix planner did not converge ({sol.result.status})")
         return helix_trajectory(sol, profile.name, profile.mass_kg, extra={"tracking_margin": dict(p)})
 
-    # seconds of IPOPT before every flight otherwise (8.5 s for arducopter_sitl): made once per profile and table
+    # seconds of IPOPT before every flight otherwise (7.7 s for arducopter_sitl: bench/RESULTS.md, "The plan cache")
     return cached_plan("helix-calm", profile, {"plan": dict(p)}, solve)
 
 

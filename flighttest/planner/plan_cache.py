@@ -28,12 +28,11 @@ from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import Trajectory
 
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]  # flighttest/
+
 
 def cache_dir() -> Path:
     return Path(os.environ.get("FLIGHTTEST_CACHE", "~/.cache/flighttest")).expanduser() / "plans"
-
-
-PACKAGE_ROOT = Path(__file__).resolve().parents[1]  # flighttest/
 
 
 def source_digest(root: Path) -> str:
