@@ -5,7 +5,9 @@ own calm plan is made once."""
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
+import time
 import tomllib
 
 import pytest
@@ -130,3 +132,21 @@ def test_the_helix_missions_calm_plan_is_made_once_and_again_for_an_edited_scrip
         f.write("\n# the user's edit\n")
     load_mission_module("helix").plan(x500, cfg)
     assert len(calls) == 2
+
+
+def test_files_unused_for_a_month_are_pruned_when_a_plan_is_kept_and_loading_one_keeps_it(cache, x500):
+    solve = Counting(x500)
+    plan_cache.cached_plan("t", x500, {"q": "flown every week"}, solve)
+    cache.mkdir(parents=True, exist_ok=True)
+    stale = [cache / f"helix-x500-{n}" for n in ("0ld.csv", "0ld.json", "0ld.failed", "0ld.lock", "0ld.timedout")]
+    for path in stale:
+        path.write_text("made by an older flighttest")
+    month_ago = time.time() - (plan_cache.KEEP_UNUSED_DAYS + 1) * 86400
+    for path in [*stale, *cache.glob("t-x500-*")]:
+        os.utime(path, (month_ago, month_ago))
+    plan_cache.cached_plan("t", x500, {"q": "flown every week"}, solve)  # loaded: used today
+    assert solve.calls == 1 and all(p.exists() for p in stale)  # a load prunes nothing
+    plan_cache.cached_plan("t", x500, {"q": "new"}, solve)  # a new plan kept: the unused go
+    assert solve.calls == 2 and not any(p.exists() for p in stale)
+    assert len(list(cache.glob("t-x500-*.csv"))) == 2  # the one loaded a moment ago stays, beside the new one
+    assert plan_cache.prune(cache, now_s=time.time() + 31 * 86400) > 0  # a month on, both would go

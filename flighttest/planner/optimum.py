@@ -174,7 +174,7 @@ def optimum_for(traj: Trajectory, profile: VehicleProfile, progress=lambda _: No
         return None
     if q is None:
         return None
-    from flighttest.planner.plan_cache import planning_lock
+    from flighttest.planner.plan_cache import planning_lock, prune, used
     from flighttest.planner.wind_plans import WALL_TIME_STATUS
 
     path = _cache_path(profile, q)
@@ -182,6 +182,7 @@ def optimum_for(traj: Trajectory, profile: VehicleProfile, progress=lambda _: No
         with contextlib.suppress(OSError, ValueError):
             cached = Optimum.from_dict(json.loads(path.read_text(encoding="utf-8")))
             if cached is not None:
+                used(path)
                 return cached
         if q["kind"] == "helix":
             progress("the planner's optimum for this helix (margin 0, full limits): a few seconds")
@@ -193,6 +194,7 @@ def optimum_for(traj: Trajectory, profile: VehicleProfile, progress=lambda _: No
             tmp = path.with_suffix(".tmp")
             tmp.write_text(json.dumps(opt.to_dict(), indent=2) + "\n", encoding="utf-8")
             tmp.replace(path)
+        prune(path.parent)
     return opt
 
 

@@ -8,6 +8,9 @@ Kept in ``$FLIGHTTEST_CACHE/plans`` (``~/.cache/flighttest/plans`` by default). 
 - the code that plans: flighttest's own source, the mission script that asked (users edit theirs) and
   CasADi's version. flighttest's version number stays the same from one commit to the next, so a key on it
   alone kept an older planner's plans flying after an update.
+
+Every update of flighttest so changes every key: a file no flight has loaded or written for
+``KEEP_UNUSED_DAYS`` is removed whenever a new plan is kept.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import hashlib
 import inspect
 import json
 import os
+import time
 from collections.abc import Callable, Iterator
 from importlib import metadata
 from pathlib import Path
@@ -26,9 +30,10 @@ from typing import Any
 
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
-from flighttest.model.trajectory import Trajectory
+from flighttest.model.trajectory import Trajectory, file_paths
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]  # flighttest/
+KEEP_UNUSED_DAYS = 30.0  # a month of test days: a vehicle flown again within it plans nothing
 
 
 def cache_dir() -> Path:
@@ -89,18 +94,49 @@ def planning_lock(base: Path) -> Iterator[None]:
         return
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
+        with contextlib.suppress(OSError, NotImplementedError):
+            os.utime(fd)  # a lock in use is never old enough for prune()
         yield
     finally:
         os.close(fd)  # closing releases the lock
 
 
+def used(*paths: Path) -> None:
+    """Mark cache files as used now (their modification time), so that ``prune`` keeps them."""
+    for path in paths:
+        with contextlib.suppress(OSError):
+            os.utime(path)
+
+
+def load_plan(base: Path, profile: VehicleProfile) -> Trajectory:
+    """The plan kept under ``base``, marked as used; ``FlighttestError`` where there is none."""
+    traj = Trajectory.load(base, profile)
+    used(*file_paths(base))
+    return traj
+
+
+def prune(root: Path, keep_days: float = KEEP_UNUSED_DAYS, now_s: float | None = None) -> int:
+    """Remove the files in ``root`` not used for ``keep_days``; how many were removed."""
+    cutoff = (time.time() if now_s is None else now_s) - keep_days * 86400.0
+    removed = 0
+    with contextlib.suppress(OSError):
+        for path in root.iterdir():
+            with contextlib.suppress(OSError):
+                if path.is_file() and path.stat().st_mtime < cutoff:
+                    path.unlink()
+                    removed += 1
+    return removed
+
+
 def save_quietly(traj: Trajectory, base: Path) -> None:
-    """Into the cache; a cache that cannot be written plans again next time, nothing worse."""
+    """Into the cache, the unused files pruned; a cache that cannot be written plans again next time, nothing
+    worse."""
     try:
         base.parent.mkdir(parents=True, exist_ok=True)
         traj.save(base)
     except OSError:
         pass
+    prune(base.parent)
 
 
 def cached_plan(kind: str, profile: VehicleProfile, question: dict[str, Any],
@@ -110,7 +146,7 @@ def cached_plan(kind: str, profile: VehicleProfile, question: dict[str, Any],
     base = cache_dir() / f"{kind}-{profile.name}-{cache_key(profile, question, solve)}"
     with planning_lock(base):
         try:
-            return Trajectory.load(base, profile)
+            return load_plan(base, profile)
         except FlighttestError:
             pass
         traj = solve()

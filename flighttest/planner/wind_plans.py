@@ -19,7 +19,7 @@ from typing import Any
 from flighttest.errors import FlighttestError
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import Trajectory
-from flighttest.planner.plan_cache import cache_dir, cache_key, planning_lock, save_quietly
+from flighttest.planner.plan_cache import cache_dir, cache_key, load_plan, planning_lock, save_quietly
 
 # Each IPOPT solve of a plan for the wind stops after this long: a wind the vehicle can barely serve can
 # otherwise take IPOPT thousands of slow iterations (arducopter_sitl, 5 m/s: bench/RESULTS.md, "Plans for
@@ -55,7 +55,7 @@ def helix_plans_for_winds(profile: VehicleProfile, plan: dict[str, Any], speeds_
         timed_out = base.parent / f"{base.name}.timedout"
         with planning_lock(base):
             try:
-                out.append(Trajectory.load(base, profile))
+                out.append(load_plan(base, profile))
                 continue
             except FlighttestError:
                 pass
