@@ -757,7 +757,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     console.print(
         f"VRS onset of {profile.name} from {args.log}: [bold]{onset.w_onset_mps:.3f} ± "
         f"{onset.uncertainty_mps:.3f} m/s[/] = {onset.w_onset_n:.4f} ± {onset.uncertainty_n:.4f} v_h "
-        f"(v_h {onset.v_h_mps:.2f} m/s; hinge fit, fluctuation rises {onset.rise_ratio:.1f}× over hover; "
+        f"(v_h {onset.v_h_mps:.2f} m/s; hinge fit, fluctuation rises {onset.rise_ratio:.1f}× over hover, "
+        f"{onset.observed_rise_ratio:.1f}× in the fastest samples; "
         f"{onset.samples} descending samples up to {onset.max_speed_mps:.2f} m/s)"
     )
     console.print(f"[dim]{onset.probe_evidence}[/]")
