@@ -417,7 +417,6 @@ class Onset:
     max_speed_mps: float
     samples: int
     rise_ratio: float  # fitted RMS fluctuation at max_speed_mps / hover's
-    observed_rise_ratio: float  # the fastest samples' own RMS fluctuation / the fitted hover's
     bootstrap_sd_mps: float  # the replicates' plain standard deviation, their far tail and all
     bootstrap_spread_mps: float  # half the width of their central 68 %: what the uncertainty takes
     resolution_mps: float
@@ -427,6 +426,7 @@ class Onset:
     wind: ProbeWind | None = None  # the air the probe was flown in (uncertainty_mps includes its share)
     estimate_error_mps: float = 0.0  # the velocity estimate's share of uncertainty_mps (velocity_sd_mps/√passes)
     onset_passes: int = 1  # the sweep's passes through the onset band, farther apart than velocity_tau_s
+    observed_rise_ratio: float = math.nan  # the fastest samples' own RMS fluctuation / the fitted hover's
 
     def summary(self) -> dict:
         d = asdict(self)
