@@ -69,7 +69,7 @@ def _write(tmp_path, base, autopilot) -> str:
 # -- the profile's table -------------------------------------------------------------------------------
 
 
-def test_arducopter_sitl_carries_arducopters_defaults_and_the_others_none(ac):
+def test_arducopter_sitl_carries_arducopters_defaults_px4s_profiles_px4s(ac):
     assert ac.autopilot == AutopilotLimits(name="ArduPilot", accel_z_max_mps2=ARDUCOPTER["WP_ACC_Z"],
                                            accel_h_max_mps2=ARDUCOPTER["WP_ACC"],
                                            descent_max_mps=ARDUCOPTER["WP_SPD_DN"],
@@ -78,7 +78,9 @@ def test_arducopter_sitl_carries_arducopters_defaults_and_the_others_none(ac):
                                            jerk_z_max_mps3=ARDUCOPTER["PSC_JERK_D"])  # fmt: skip
     text = Path(ac.path).read_text(encoding="utf-8")
     assert all(name in text for name in ARDUCOPTER)  # the comment cites the parameters
-    for name in ("x500", "sih_quadx", "mambo", "tunnel_rig"):
+    for name in ("x500", "sih_quadx"):  # PX4's: the vertical speeds its offboard control clips to, by default
+        assert load_profile(name).autopilot == AutopilotLimits(name="PX4", descent_max_mps=1.5, climb_max_mps=3.0)
+    for name in ("mambo", "tunnel_rig"):
         p = load_profile(name)
         assert p.autopilot is None and p.summary()["autopilot"] is None and "autopilot" not in profile_to_dict(p)
 
@@ -333,3 +335,28 @@ def test_the_vehicles_own_limits_replace_the_profiles_only_where_they_differ():
     old = ardupilot_limits({"WPNAV_ACCEL_Z": 150, "WPNAV_SPEED_DN": 120.0, "PSC_JERK_Z": 0.0})
     assert old["accel_z_max_mps2"].value == 1.5 and old["descent_max_mps"].value == pytest.approx(1.2)
     assert "jerk_z_max_mps3" not in old and old["accel_z_max_mps2"].describe() == "WPNAV_ACCEL_Z 150 (1.5 m/s²)"
+
+
+def test_px4s_speed_limits_change_no_flown_plan_and_guided_limits_replace_px4s():
+    from flighttest.flying.live_limits import ardupilot_limits, plans_bound, px4_limits, with_live_limits
+
+    x500 = load_profile("x500")
+    live = px4_limits({"MPC_Z_VEL_MAX_DN": 3.0, "MPC_Z_VEL_MAX_UP": 3.0, "MPC_XY_P": 0.95})
+    raised, diffs = with_live_limits(x500, live, "PX4")
+    assert raised.autopilot.descent_max_mps == 3.0 and diffs == ["MPC_Z_VEL_MAX_DN 3 (the profile's 1.5)"]
+    assert with_live_limits(x500, px4_limits({"MPC_Z_VEL_MAX_DN": 1.5}), "PX4") == (x500, [])
+    plans = [load_mission_module(m).plan(x500, load_mission_config(mission_config_path(m)))
+             for m in ("probe", "vertical")]  # fmt: skip
+    assert not plans_bound(plans, x500, raised)  # PX4 clips: only the optimum is made again
+    # ArduCopter's speed limits alone: planned again only where a plan reached the old one or passes the new
+    ac = load_profile("arducopter_sitl")
+    vertical = load_mission_module("vertical").plan(ac, load_mission_config(mission_config_path("vertical")))
+    peak = float(vertical.df["vd_mps"].max())
+    for wp_spd_dn, bound in ((3.0, False), (peak / FRACTION - 0.01, True)):
+        faster, _ = with_live_limits(ac, ardupilot_limits({**ARDUCOPTER, "WP_SPD_DN": wp_spd_dn}))
+        assert plans_bound([vertical], ac, faster) is bound, wp_spd_dn
+    steeper, _ = with_live_limits(ac, ardupilot_limits({**ARDUCOPTER, "WP_ACC_Z": 2.0}))
+    assert plans_bound([vertical], ac, steeper)  # an acceleration shapes the whole plan
+    # an x500 profile on ArduPilot firmware: GUIDED's limits, not PX4's table with them mixed in
+    on_ap, _ = with_live_limits(x500, ardupilot_limits(ARDUCOPTER))
+    assert on_ap.autopilot == ac.autopilot

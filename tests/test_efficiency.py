@@ -8,6 +8,7 @@ the arithmetic of ``flown_over_optimum``. The flights' own figures are asserted 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from flighttest.flying.missions_config import load_mission_config
 from flighttest.model.profiles import load_profile
 from flighttest.model.trajectory import Trajectory
 from flighttest.planner import optimum as opt
+from flighttest.planner.autopilot_limits import NO_LIMITS, plan_limits
 from flighttest.planner.vertical import plan_vertical
 
 RATE_HZ = 50.0
@@ -78,7 +80,7 @@ def test_the_vertical_optimum_is_faster_than_the_plan_that_flies(vehicle):
     assert best.optimum_s < 0.8 * flown_plan.descent_time_s
     # the optimum rides the bound: cruise at w_allow, no faster
     assert best.optimum_s > best.height_m / profile.w_allow_mps
-    if profile.autopilot is not None:  # the autopilot's full limits, not the 90 % the flown plans keep
+    if plan_limits(profile) is not NO_LIMITS:  # the autopilot's full limits, not the 90 % the flown plans keep
         derated = plan_vertical(profile, best.height_m, margin_mps=0.0, accel_fraction=1.0)
         assert best.optimum_s < derated.t_f_s - 0.1
 
@@ -106,6 +108,19 @@ def test_the_helix_optimum_uses_the_autopilots_full_limits_and_is_cached(tmp_pat
     monkeypatch.setattr(opt, "solve", no_solve)
     again = Trajectory(traj.df, {k: v for k, v in traj.meta.items() if k != opt.OPTIMUM_KEY})
     assert opt.optimum_for(again, profile).optimum_s == best["optimum_s"]
+
+
+def test_the_px4_helix_optimum_descends_no_faster_than_px4_lets_it():
+    # PX4's offboard control clips its vertical velocity setpoint to MPC_Z_VEL_MAX_DN (1.5 m/s by default):
+    # without it the optimum of sih_quadx's helix took 2.90 s hover to hover, descending at up to 2.5 m/s, which
+    # PX4 flies no faster than 1.5 (the flown helix, 5.4 s, read 1.85× an optimum it could not fly)
+    profile = load_profile("sih_quadx")
+    assert profile.autopilot.name == "PX4" and profile.autopilot.descent_max_mps == 1.5
+    assert plan_limits(profile) is NO_LIMITS  # the flown plans: their configs keep below it, the preflight checks
+    default = opt.helix_optimum(profile, 5.0, 3.0).optimum_s
+    raised = opt.helix_optimum(replace(profile, autopilot=replace(profile.autopilot, descent_max_mps=3.0)),
+                               5.0, 3.0).optimum_s  # fmt: skip
+    assert 3.6 < default < 4.4 and raised < 3.2
 
 
 def test_a_plan_turned_for_another_wind_direction_asks_the_same_question():

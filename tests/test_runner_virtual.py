@@ -22,6 +22,7 @@ from flighttest.flying.mission_scripts import load_mission_module
 from flighttest.flying.runner import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, FlyRequest, MissionRunner
 from flighttest.planner.optimum import vertical_optimum
 from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
+from sitl_fakes.scripted import PX4_PARAMS as PX4_DEFAULTS
 from sitl_fakes.scripted import ScriptedAutopilot
 from sitl_fakes.virtual_time import run_virtual
 from virtual_flight import DESCENT_M, START_M, X500, Flight, config, fly, in_phase
@@ -276,6 +277,27 @@ def test_older_ardupilot_names_are_refused_with_the_value_to_set_in_their_own_un
     assert "set WPNAV_ACCEL_Z to 150" in f.outcome.abort_reason  # cm/s², as that firmware holds it
     checks = {c["name"]: c for c in f.summary["preflight"]["checks"]}
     assert checks["WPNAV_SPEED_DN"]["status"] == "pass" and checks["WPNAV_SPEED_DN"]["value"] == "1.5 m/s"
+
+
+def test_px4s_own_vertical_speeds_keep_the_plan_and_make_its_optimum_within_them(tmp_path):
+    # issue 22: PX4 clips offboard descents to MPC_Z_VEL_MAX_DN. Raised for the test day (as the rehearsal does), the
+    # plan stays as it is (its config keeps it below PX4's default) and the yardstick is made for the vehicle's own
+    def replan(_profile):
+        raise AssertionError("a PX4 speed limit planned the mission again")
+
+    raised = {**PX4_DEFAULTS, "MPC_Z_VEL_MAX_DN": 3.0}
+    f = fly(tmp_path, params=raised, request={"replan": replan})
+    assert f.outcome.outcome == "completed", f.outcome.abort_reason
+    live = next(e for e in f.events if e["event"] == "live_limits")
+    assert live["changed"] == ["MPC_Z_VEL_MAX_DN 3 (the profile's 1.5)"] and live["replanned"] is False
+    assert f.runner.req.profile.autopilot.descent_max_mps == 3.0
+    assert f.runner.traj.duration_s == load_mission_module("vertical").plan(X500, config()).duration_s
+    assert f.summary["optimum_s"] == vertical_optimum(f.runner.req.profile, DESCENT_M).optimum_s
+    # lowered below the plan: flown slower than asked? No: refused before arming, the parameter named
+    (tmp_path / "low").mkdir()
+    g = fly(tmp_path / "low", params={**PX4_DEFAULTS, "MPC_Z_VEL_MAX_DN": 0.2}, request={"replan": replan})
+    assert g.outcome.outcome == "refused" and "MPC_Z_VEL_MAX_DN" in g.outcome.abort_reason
+    assert "arm" not in [c for _, c in g.ap.commands]
 
 
 def _replan(cfg):

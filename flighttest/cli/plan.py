@@ -230,7 +230,7 @@ class _Summary:
 
 def _autopilot_rows(profile: VehicleProfile) -> list[tuple[str, str]]:
     """The row naming the autopilot limits the plan keeps within (none for a profile without them)."""
-    from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION
+    from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION, NO_LIMITS, plan_limits
 
     ap = profile.autopilot
     if ap is None:
@@ -239,6 +239,8 @@ def _autopilot_rows(profile: VehicleProfile) -> list[tuple[str, str]]:
         ("vertical accel", ap.accel_z_max_mps2, "m/s²"), ("horizontal accel", ap.accel_h_max_mps2, "m/s²"),
         ("descent", ap.descent_max_mps, "m/s"), ("climb", ap.climb_max_mps, "m/s")) if v is not None]  # fmt: skip
     limits = ", ".join(f"{label} {v:g} {unit}" for label, v, unit in named) or "none given"
+    if plan_limits(profile) is NO_LIMITS:  # PX4's: it clips, the plan is not shaped (planner.autopilot_limits)
+        return [("autopilot limits", f"{ap.name} clips at {limits}: the preflight checks the plan against them")]
     return [("autopilot limits", f"≤ {AUTOPILOT_LIMIT_FRACTION:.0%} of {ap.name}'s {limits}")]
 
 

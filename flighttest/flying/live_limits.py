@@ -5,8 +5,12 @@ ArduCopter's GUIDED mode shapes its setpoints with its position controller's lim
 (``flighttest.planner.autopilot_limits``). Firmware names them two ways: ArduCopter master since 2025 in SI
 units (``WP_ACC_Z`` m/s², ``PSC_JERK_D``), earlier firmware in cm (``WPNAV_ACCEL_Z`` cm/s², ``PSC_JERK_Z``);
 ArduCopter SITL 90700977 still had the older names beside the newer ``MAV_GCS_SYSID`` (bench/RESULTS.md,
-"Parameter files on real firmware"). PX4's offboard control takes the setpoints as sent: its profiles
-carry no such table.
+"Parameter files on real firmware"). PX4's offboard control takes the setpoints as sent but clips its vertical
+velocity setpoint to ``MPC_Z_VEL_MAX_DN`` and ``MPC_Z_VEL_MAX_UP`` (PositionControl).
+
+A change of the speed limits alone leaves a plan that neither reached the old limit nor passes the new one as
+it is (:func:`plans_bound`), and PX4's never bound a flown plan (``flighttest.planner.autopilot_limits``): then
+only the plan's optimum is made again, within the vehicle's own limits.
 """
 
 from __future__ import annotations
@@ -15,7 +19,11 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from flighttest.model.profiles import AutopilotLimits, VehicleProfile
+from flighttest.model.trajectory import Trajectory
+from flighttest.planner.autopilot_limits import plan_limits
 
 # a profile's [autopilot] field: (the parameter, its scale to SI) in the names of each firmware, newest first
 ARDUPILOT_LIMITS: dict[str, tuple[tuple[str, float], ...]] = {
@@ -26,6 +34,14 @@ ARDUPILOT_LIMITS: dict[str, tuple[tuple[str, float], ...]] = {
     "jerk_h_max_mps3": (("PSC_JERK_NE", 1.0), ("PSC_JERK_XY", 1.0)),
     "jerk_z_max_mps3": (("PSC_JERK_D", 1.0), ("PSC_JERK_Z", 1.0)),
 }
+PX4_LIMITS: dict[str, tuple[tuple[str, float], ...]] = {
+    "descent_max_mps": (("MPC_Z_VEL_MAX_DN", 1.0),),
+    "climb_max_mps": (("MPC_Z_VEL_MAX_UP", 1.0),),
+}
+# the limits a plan meets only at its peak speeds: whether a change of them matters shows in the plan itself
+SPEED_FIELDS = frozenset({"descent_max_mps", "climb_max_mps"})
+# a plan within this of a limit reached it: planned again, it may go faster where the limit went up
+BINDING_MPS = 0.02
 # two limits this close are the same (a float32 parameter read back; a cm value scaled)
 SAME_REL = 1e-4
 
@@ -45,8 +61,18 @@ class LiveLimit:
 def ardupilot_limits(params: dict[str, float | int | None] | None) -> dict[str, LiveLimit]:
     """The GUIDED limits the parameters hold (field → ``LiveLimit``), in whichever names the firmware uses;
     a limit the vehicle does not report, or reports as 0 or less, is left out."""
+    return _limits(params, ARDUPILOT_LIMITS)
+
+
+def px4_limits(params: dict[str, float | int | None] | None) -> dict[str, LiveLimit]:
+    """The vertical speeds PX4's position control clips offboard setpoints to, as the parameters hold them."""
+    return _limits(params, PX4_LIMITS)
+
+
+def _limits(params: dict[str, float | int | None] | None,
+            table: dict[str, tuple[tuple[str, float], ...]]) -> dict[str, LiveLimit]:  # fmt: skip
     out: dict[str, LiveLimit] = {}
-    for f, names in ARDUPILOT_LIMITS.items():
+    for f, names in table.items():
         for name, scale in names:
             v = (params or {}).get(name)
             if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v > 0:
@@ -66,10 +92,14 @@ def param_value(params: dict[str, float | int | None], new_name: str) -> tuple[s
     return new_name, None, 1.0
 
 
-def with_live_limits(profile: VehicleProfile, live: dict[str, LiveLimit]) -> tuple[VehicleProfile, list[str]]:
+def with_live_limits(profile: VehicleProfile, live: dict[str, LiveLimit],
+                     autopilot: str = "ArduPilot") -> tuple[VehicleProfile, list[str]]:  # fmt: skip
     """``profile`` with its ``[autopilot]`` table the vehicle's own (the fields the vehicle reports; the others
-    as they were), and what changed ("WP_ACC_Z 2 (the profile's 1)"). Unchanged where nothing differs."""
-    ap = profile.autopilot or AutopilotLimits(name="ArduPilot")
+    as they were), and what changed ("WP_ACC_Z 2 (the profile's 1)"). Unchanged where nothing differs. A
+    profile whose table is another autopilot's (an x500 profile on ArduPilot firmware) gets one of
+    ``autopilot``'s own, made of what the vehicle reports."""
+    same = profile.autopilot is not None and profile.autopilot.name == autopilot
+    ap = profile.autopilot if same and profile.autopilot is not None else AutopilotLimits(name=autopilot)
     updates, diffs = {}, []
     for f, lim in live.items():
         old = getattr(ap, f)
@@ -79,3 +109,26 @@ def with_live_limits(profile: VehicleProfile, live: dict[str, LiveLimit]) -> tup
     if not updates:
         return profile, []
     return dataclasses.replace(profile, autopilot=dataclasses.replace(ap, **updates)), diffs
+
+
+def plans_bound(trajs: list[Trajectory], old: VehicleProfile, new: VehicleProfile) -> bool:
+    """Whether plans made for ``old`` must be made again for ``new``: a limit other than a speed changed
+    (accelerations and jerks shape the whole plan), or a plan's peak descent or climb passes the new speed
+    limit's share (``AUTOPILOT_LIMIT_FRACTION``) or reached the old one's (planned again, it may go faster)."""
+    a, b = old.autopilot, new.autopilot
+    changed = {f.name for f in dataclasses.fields(AutopilotLimits)
+               if (getattr(a, f.name) if a else None) != (getattr(b, f.name) if b else None)}  # fmt: skip
+    if changed - SPEED_FIELDS - {"name"}:
+        return True
+    lim_old, lim_new = plan_limits(old), plan_limits(new)
+    for traj in trajs:
+        vd = traj.df["vd_mps"].to_numpy(float)
+        peaks = {"descent_max_mps": float(np.nanmax(vd, initial=0.0)),
+                 "climb_max_mps": float(np.nanmax(-vd, initial=0.0))}  # fmt: skip
+        for f in changed & SPEED_FIELDS:
+            cap_old, cap_new = getattr(lim_old, f), getattr(lim_new, f)
+            if cap_new is not None and peaks[f] > cap_new + 1e-9:
+                return True
+            if cap_old is not None and peaks[f] >= cap_old - BINDING_MPS:
+                return True
+    return False

@@ -34,7 +34,14 @@ from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopil
 from flighttest.flying.ground import GroundEvidence
 from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, LadderExecutor
 from flighttest.flying.link import GCS_SYSID, Link, VehicleLink
-from flighttest.flying.live_limits import ARDUPILOT_LIMITS, LiveLimit, ardupilot_limits, with_live_limits
+from flighttest.flying.live_limits import (
+    ARDUPILOT_LIMITS,
+    LiveLimit,
+    ardupilot_limits,
+    plans_bound,
+    px4_limits,
+    with_live_limits,
+)
 from flighttest.flying.log_writer import FlightLogWriter
 from flighttest.flying.outcome import FlightOutcome, FlyRequest, Outcome, Phase, final_mode
 from flighttest.flying.pauses import FlightPauses
@@ -59,7 +66,7 @@ from flighttest.flying.watch import FlightWatch
 from flighttest.flying.wind import PRIOR_SD_MPS, WindEstimate, WindSources, plan_margin_in_wind, rotate_plan
 from flighttest.inputs import MAX_DURATION_S
 from flighttest.model.trajectory import Trajectory
-from flighttest.planner.optimum import EFFICIENCY_KEYS, efficiency, optimum_for
+from flighttest.planner.optimum import EFFICIENCY_KEYS, OPTIMUM_KEY, efficiency, optimum_for, with_optimum
 
 # re-exported: what callers of the runner have always imported from here
 __all__ = ["LADDER_TIMEOUT_S", "LINK_GIVE_UP_S", "FlightOutcome", "FlyRequest", "MissionRunner", "final_mode", "fly"]
@@ -606,7 +613,9 @@ class MissionRunner:
         if rules.name == ARDUPILOT and all_params:  # older firmware's names of the GUIDED limits too
             params.update({n: all_params[n] for names in ARDUPILOT_LIMITS.values() for n, _ in names
                            if n in all_params})  # fmt: skip
-            await self._plan_within(ardupilot_limits(params))
+            await self._plan_within(ardupilot_limits(params), ARDUPILOT)
+        elif rules.name != ARDUPILOT:
+            await self._plan_within(px4_limits(all_params or params), rules.name)
         # the parameter snapshot of this flight (params.json): everything relevant; else the values just read
         snap = snapshot(all_params, params, await link.autopilot_name(), time.time(), note)
         try:
@@ -641,15 +650,35 @@ class MissionRunner:
         self.event("preflight", ok=pre.ok, failures=[c.name for c in pre.failures])
         return pre
 
-    async def _plan_within(self, live: dict[str, LiveLimit]) -> None:
-        """Plan the mission again within the vehicle's own GUIDED limits where they differ from the profile's
-        (``flighttest.flying.live_limits``): a limit raised for the test day lets the plan go faster, one
-        lowered keeps it flyable. A trajectory file is flown as it is (the preflight judges it)."""
+    async def _plan_within(self, live: dict[str, LiveLimit], autopilot: str) -> None:
+        """Plan the mission again within the vehicle's own limits (ArduCopter's GUIDED shaping, PX4's vertical
+        speeds) where they differ from the profile's (``flighttest.flying.live_limits``): a limit raised for the
+        test day lets the plan go faster, one lowered keeps it flyable. Plans that a change of speed limits does
+        not touch are kept, their optimum made again for the vehicle as it is. A trajectory file is flown as it
+        is (the preflight judges it)."""
         req = self.req
-        profile, diffs = with_live_limits(req.profile, live)
+        profile, diffs = with_live_limits(req.profile, live, autopilot)
         if not diffs or req.replan is None:
             return
-        self.event("live_limits", changed=diffs)
+        if not plans_bound([self.traj, *req.wind_plans], req.profile, profile):
+            # the yardstick is the vehicle's: an optimum faster than its autopilot lets it fly is not one
+            # (PX4's helix optimum 2.90 s without MPC_Z_VEL_MAX_DN, 3.96 s within its 1.5 m/s: bench/RESULTS.md)
+            self.event("live_limits", changed=diffs, replanned=False)
+            for traj in (req.trajectory, self.traj, *req.wind_plans):
+                traj.meta.pop(OPTIMUM_KEY, None)
+            req.profile = profile
+            try:
+                await asyncio.to_thread(with_optimum, req.trajectory, profile, req.print_fn)
+            except Exception as exc:  # no yardstick is no reason to refuse the flight
+                self.event("optimum_failed", error=repr(exc))
+            if OPTIMUM_KEY in req.trajectory.meta:
+                self.traj.meta[OPTIMUM_KEY] = req.trajectory.meta[OPTIMUM_KEY]
+            try:
+                self.log.save_trajectory(req.trajectory)
+            except OSError as exc:
+                raise _Refused(f"cannot write the flight log in {self.log.dir} ({exc.strerror or exc})") from None
+            return
+        self.event("live_limits", changed=diffs, replanned=True)
         self.progress(f"the vehicle's own limits differ from the profile's: {'; '.join(diffs)}: planning within them")
         try:
             traj, wind_plans = await asyncio.to_thread(req.replan, profile)

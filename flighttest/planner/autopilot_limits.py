@@ -7,6 +7,11 @@ a descent that rides its bound, and the preflight (``ardupilot_param_checks``) r
 that plans for a profile with such a table keeps ``AUTOPILOT_LIMIT_FRACTION`` of each limit: the
 preflight compares the plan's largest value with the parameter (``≥``), and the helix's between-node
 path and the 100 Hz file may pass a bound that holds at the mesh's nodes by a little.
+
+PX4's table is of another kind: its offboard control shapes nothing but clips the vertical velocity
+setpoint to ``MPC_Z_VEL_MAX_DN``/``UP``. It bounds the planner's optimum (the yardstick flies no faster
+than the vehicle can) and not the flown plans: their configs keep below PX4's defaults, and a plan asked
+to go faster is refused by the preflight naming the parameter, not flown slower than asked.
 """
 
 from __future__ import annotations
@@ -44,11 +49,11 @@ NO_LIMITS = PlanLimits()
 
 def plan_limits(profile: VehicleProfile, fraction: float = AUTOPILOT_LIMIT_FRACTION) -> PlanLimits:
     """``fraction`` of each limit the profile's autopilot shapes setpoints with; ``NO_LIMITS`` for a
-    profile without an ``[autopilot]`` table."""
+    profile without an ``[autopilot]`` table, and for PX4's below the full limits (module docstring)."""
     if not 0 < fraction <= 1:
         raise FlighttestError(f"autopilot limit fraction must lie in (0, 1] (got {fraction!r})")
     ap = profile.autopilot
-    if ap is None:
+    if ap is None or (ap.name == "PX4" and fraction < 1.0):  # a flown plan: PX4 clips, the preflight checks
         return NO_LIMITS
 
     def derated(v: float | None) -> float | None:
