@@ -16,7 +16,8 @@ vehicle with no history flies today's conservative margins); each next one plans
 
 The next margin is their sum, never below ``floor_mps`` and never more than ``max_narrow_fraction``
 narrower than the last. The tracking room the plan leaves the autopilot (``EXPAND_KEYS``: the helix's rate
-fraction and thrust rate, the vertical's acceleration fraction) widens by ``expand_fraction`` after a flight
+fraction, thrust rate and descent speed, the vertical's acceleration fraction; :func:`expand_caps`) widens by
+``expand_fraction`` after a flight
 that completed with the guard silent and whose least margin kept the estimate's error and the reserve.
 Where the planner finds no plan for the next margins, that flight plans halfway from the last one's
 (:func:`halfway_budget`), once. The build-up stops at the first of: a flight that did not complete, a guard
@@ -36,6 +37,7 @@ from typing import Any
 
 from flighttest.analysis.margin_evidence import MarginEvidence
 from flighttest.flying.missions_config import BuildUpConfig
+from flighttest.model.profiles import VehicleProfile
 
 # the [plan] key each descent's margin inside the guard's bound is, on top of the guard's own margin
 BUILD_UP_KEYS = {"vertical": "extra_margin_mps", "helix": "guard_margin_mps"}
@@ -44,8 +46,26 @@ BUILD_UP_KEYS = {"vertical": "extra_margin_mps", "helix": "guard_margin_mps"}
 # (on the fake's x500 a guard margin of 0.27 m/s instead of 0.4 planned the same 7.77 s helix: bench/RESULTS.md,
 # "The build-up")
 EXPAND_KEYS = {"vertical": {"accel_fraction": 1.0},
-               "helix": {"rate_fraction": 1.0, "thrust_rate_max_mps3": 100.0}}  # fmt: skip
+               "helix": {"rate_fraction": 1.0, "thrust_rate_max_mps3": 100.0, "descent_max_mps": math.inf}}  # fmt: skip
+# the helix's descent speed widens up to this share of the vehicle's own descent limit (PX4's MPC_Z_VEL_MAX_DN
+# clips the setpoint and its correction together): once the helix plans within the clip's margins its time is set
+# by its own 1.3 m/s (sih_quadx: 5.03 s hover to hover at 1.3, 4.71 s at 1.43; bench/RESULTS.md, "PX4's vertical
+# speed clip in the yardstick"). A vehicle whose limit is not known keeps the config's.
+DESCENT_ROOM_FRACTION = 0.95
 SAME_MPS = 0.005  # margins closer than this are the same margin: a flight with it proves nothing new
+
+
+def expand_caps(mission: str, profile: VehicleProfile) -> dict[str, float]:
+    """The tracking room each ``EXPAND_KEYS`` key of ``mission`` may widen to on ``profile``: the descent speed
+    up to ``DESCENT_ROOM_FRACTION`` of the vehicle's own limit (left out where the profile knows none)."""
+    caps = dict(EXPAND_KEYS[mission])
+    if "descent_max_mps" in caps:
+        limit = profile.autopilot.descent_max_mps if profile.autopilot is not None else None
+        if limit is None:
+            del caps["descent_max_mps"]
+        else:
+            caps["descent_max_mps"] = min(caps["descent_max_mps"], DESCENT_ROOM_FRACTION * limit)
+    return caps
 
 
 @dataclass(frozen=True)

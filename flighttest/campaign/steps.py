@@ -28,6 +28,7 @@ from flighttest.campaign.build_up import (
     BuildUpFlight,
     MarginBudget,
     best_flight,
+    expand_caps,
     first_budget,
     halfway_budget,
     next_budget,
@@ -276,11 +277,12 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
     from flighttest.analysis.margin_evidence import flight_evidence, no_evidence
 
     cfg0 = ctx.config(mission)
-    key, rules, caps = BUILD_UP_KEYS[mission], cfg0.build_up, EXPAND_KEYS[mission]
+    key, rules = BUILD_UP_KEYS[mission], cfg0.build_up
     record = ctx.dir.build_up_file(mission)
     plan_id = hashlib.sha256(first_path.read_bytes()).hexdigest()
     flights = _build_up_so_far(record, plan_id)
-    budget = config_budget(mission, cfg0) if not flights else next_budget(key, flights, rules, caps)
+    budget = config_budget(mission, cfg0) if not flights else next_budget(key, flights, rules,
+                                                                          expand_caps(mission, profile))
     fixed = mission == "helix" and bool(cfg0.plan.get("trajectory"))  # a planned file flies as planned
     # resumed: the flights so far may already end it (a smaller N this time)
     why = stop_reason(flights, budget, ctx.build_up, rules) if flights else None
@@ -328,7 +330,7 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
         evidence = flight_evidence(rec["log_dir"]) if rec.get("log_dir") else no_evidence(rec.get("outcome"))
         flights.append(BuildUpFlight(k, budget, evidence, str(path), rec))
         halved = False
-        budget = next_budget(key, flights, rules, caps)
+        budget = next_budget(key, flights, rules, expand_caps(mission, live))
         why = ("the helix flies a planned file ([plan] trajectory): nothing to narrow" if fixed
                else stop_reason(flights, budget, ctx.build_up, rules))  # fmt: skip
         _write_build_up(record, plan_id, flights, why)
