@@ -79,6 +79,25 @@ def test_the_margin_used_is_counted_from_the_plans_own_least_margin():
     assert "plan kept 0.575" in b.terms[0].source
 
 
+def test_the_estimate_is_the_vehicles_the_other_descents_measured_it_too():
+    # PX4 SITL: the helix's first flight read the estimate's error as 0.000, its verticals minutes before 0.049 and
+    # 0.073; the helix narrowed to 0.249 m/s on it. The estimator is the vehicle's: the most any flight measured
+    helix = BuildUpFlight(1, MarginBudget("guard_margin_mps", 0.4), evidence(least=0.335, plan=0.534, estimate=0.0),
+                          "plans/h.csv")  # fmt: skip
+    alone = next_budget("guard_margin_mps", [helix], RULES)
+    assert {t.name: t.value_mps for t in alone.terms}["estimate"] == 0.0
+    b = next_budget("guard_margin_mps", [helix], RULES, estimates=((0.049, "the vertical's flight 1: …"),
+                                                                   (0.073, "the vertical's flight 2: …")))  # fmt: skip
+    est = next(t for t in b.terms if t.name == "estimate")
+    assert est.value_mps == 0.073 and est.source.startswith("the vertical's flight 2")
+    assert b.margin_mps == pytest.approx(alone.margin_mps + 0.073)
+    # one of its own flights measured more: that one
+    own = BuildUpFlight(1, MarginBudget("guard_margin_mps", 0.4), evidence(least=0.3, estimate=0.09), "plans/h.csv")
+    est = next(t for t in next_budget("guard_margin_mps", [own], RULES, estimates=((0.05, "x"),)).terms
+               if t.name == "estimate")  # fmt: skip
+    assert est.value_mps == 0.09 and est.source.startswith("flight 1")
+
+
 def test_an_unmeasured_estimate_takes_the_default_and_says_why():
     b = next_budget(KEY, [flight(1, 0.35, least=0.34)], RULES)
     est = next(t for t in b.terms if t.name == "estimate")

@@ -161,12 +161,14 @@ class BuildUpFlight:
                    dict(d.get("record") or {}))  # fmt: skip
 
 
-def next_budget(key: str, flights: list[BuildUpFlight], cfg: BuildUpConfig,
-                caps: dict[str, float] | None = None) -> MarginBudget:  # fmt: skip
+def next_budget(key: str, flights: list[BuildUpFlight], cfg: BuildUpConfig, caps: dict[str, float] | None = None,
+                estimates: tuple[tuple[float, str], ...] = ()) -> MarginBudget:  # fmt: skip
     """The margin the next flight plans with, from every flight so far (the last one's margin when none of
     them has a guard log to judge by), and its tracking room: the last flight's, each key of ``caps`` widened by
     ``expand_fraction`` (up to its cap) when that flight completed with the guard silent and its least margin
-    kept the estimate's error and the reserve."""
+    kept the estimate's error and the reserve. ``estimates``: the estimate's error the vehicle's other flights
+    measured (value, where), which the estimate term takes too: the estimator is the vehicle's, not the
+    descent's (PX4 SITL's helix read 0.000 m/s where its verticals just before read 0.049 and 0.073)."""
     last = flights[-1]
     used = [(f, f.used_mps) for f in flights if f.used_mps is not None]
     if not used:
@@ -177,11 +179,10 @@ def next_budget(key: str, flights: list[BuildUpFlight], cfg: BuildUpConfig,
     terms = [MarginTerm("tracking", tracking, f"flight {f_t.k}'s plan kept {f_t.planned_least_mps:.3f} m/s from the "
                         f"guard's bound, the guard's least margin was {f_t.evidence.min_margin_mps:.3f} m/s "
                         f"({f_t.evidence.log_dir})")]  # fmt: skip
-    measured = [f for f in flights if f.evidence.estimate_mps is not None]
+    measured = [(float(f.evidence.estimate_mps), f"flight {f.k}: {f.evidence.estimate_source}")
+                for f in flights if f.evidence.estimate_mps is not None] + list(estimates)  # fmt: skip
     if measured:
-        f_e = max(measured, key=lambda f: f.evidence.estimate_mps or 0.0)
-        terms.append(MarginTerm("estimate", float(f_e.evidence.estimate_mps or 0.0),
-                                f"flight {f_e.k}: {f_e.evidence.estimate_source}"))  # fmt: skip
+        terms.append(MarginTerm("estimate", *max(measured, key=lambda m: m[0])))
     else:
         terms.append(MarginTerm("estimate", cfg.estimate_default_mps,
                                 f"not measured ({last.evidence.estimate_source}): [build_up] estimate_default_mps"))

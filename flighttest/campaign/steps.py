@@ -281,8 +281,9 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
     record = ctx.dir.build_up_file(mission)
     plan_id = hashlib.sha256(first_path.read_bytes()).hexdigest()
     flights = _build_up_so_far(record, plan_id)
+    others = _estimates_elsewhere(ctx, mission)
     budget = config_budget(mission, cfg0) if not flights else next_budget(key, flights, rules,
-                                                                          expand_caps(mission, profile))
+                                                                          expand_caps(mission, profile), others)
     fixed = mission == "helix" and bool(cfg0.plan.get("trajectory"))  # a planned file flies as planned
     # resumed: the flights so far may already end it (a smaller N this time)
     why = stop_reason(flights, budget, ctx.build_up, rules) if flights else None
@@ -330,7 +331,7 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
         evidence = flight_evidence(rec["log_dir"]) if rec.get("log_dir") else no_evidence(rec.get("outcome"))
         flights.append(BuildUpFlight(k, budget, evidence, str(path), rec))
         halved = False
-        budget = next_budget(key, flights, rules, expand_caps(mission, live))
+        budget = next_budget(key, flights, rules, expand_caps(mission, live), others)
         why = ("the helix flies a planned file ([plan] trajectory): nothing to narrow" if fixed
                else stop_reason(flights, budget, ctx.build_up, rules))  # fmt: skip
         _write_build_up(record, plan_id, flights, why)
@@ -351,6 +352,22 @@ def build_up_line(f: BuildUpFlight) -> str:
     h2h = f"{e.hover_to_hover_s:.2f} s hover to hover" if e.hover_to_hover_s is not None else "no hover-to-hover time"
     least = f", guard's least margin {e.min_margin_mps:.3f} m/s" if e.min_margin_mps is not None else ""
     return f"{e.outcome}, margin {f.margin_mps:.3f} m/s, {h2h}{least}" + ("" if e.guard_silent else ", guard spoke")
+
+
+def _estimates_elsewhere(ctx: StepContext, mission: str) -> tuple[tuple[float, str], ...]:
+    """The estimate's error the campaign's other descents measured on this vehicle (their build-up records)."""
+    out = []
+    for other in BUILD_UP_KEYS:
+        if other == mission:
+            continue
+        try:
+            data = json.loads(ctx.dir.build_up_file(other).read_text(encoding="utf-8"))
+            flights = [BuildUpFlight.from_dict(d) for d in data["flights"]]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        out += [(float(f.evidence.estimate_mps), f"the {other}'s flight {f.k}: {f.evidence.estimate_source}")
+                for f in flights if f.evidence.estimate_mps is not None]  # fmt: skip
+    return tuple(out)
 
 
 def _build_up_so_far(path: Path, plan_id: str) -> list[BuildUpFlight]:
