@@ -8,9 +8,8 @@ ArduCopter SITL 90700977 still had the older names beside the newer ``MAV_GCS_SY
 "Parameter files on real firmware"). PX4's offboard control takes the setpoints as sent but clips its vertical
 velocity setpoint to ``MPC_Z_VEL_MAX_DN`` and ``MPC_Z_VEL_MAX_UP`` (PositionControl).
 
-A change of the speed limits alone leaves a plan that neither reached the old limit nor passes the new one as
-it is (:func:`plans_bound`), and PX4's never bound a flown plan (``flighttest.planner.autopilot_limits``): then
-only the plan's optimum is made again, within the vehicle's own limits.
+PX4's limits never bound a flown plan (``flighttest.planner.autopilot_limits``): where only they differ
+(:func:`plans_bound`), the plans stand and only their optimum is made again, within the vehicle's own limits.
 """
 
 from __future__ import annotations
@@ -19,10 +18,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from flighttest.model.profiles import AutopilotLimits, VehicleProfile
-from flighttest.model.trajectory import Trajectory
 from flighttest.planner.autopilot_limits import plan_limits
 
 # a profile's [autopilot] field: (the parameter, its scale to SI) in the names of each firmware, newest first
@@ -38,10 +34,6 @@ PX4_LIMITS: dict[str, tuple[tuple[str, float], ...]] = {
     "descent_max_mps": (("MPC_Z_VEL_MAX_DN", 1.0),),
     "climb_max_mps": (("MPC_Z_VEL_MAX_UP", 1.0),),
 }
-# the limits a plan meets only at its peak speeds: whether a change of them matters shows in the plan itself
-SPEED_FIELDS = frozenset({"descent_max_mps", "climb_max_mps"})
-# a plan within this of a limit reached it: planned again, it may go faster where the limit went up
-BINDING_MPS = 0.02
 # two limits this close are the same (a float32 parameter read back; a cm value scaled)
 SAME_REL = 1e-4
 
@@ -111,24 +103,7 @@ def with_live_limits(profile: VehicleProfile, live: dict[str, LiveLimit],
     return dataclasses.replace(profile, autopilot=dataclasses.replace(ap, **updates)), diffs
 
 
-def plans_bound(trajs: list[Trajectory], old: VehicleProfile, new: VehicleProfile) -> bool:
-    """Whether plans made for ``old`` must be made again for ``new``: a limit other than a speed changed
-    (accelerations and jerks shape the whole plan), or a plan's peak descent or climb passes the new speed
-    limit's share (``AUTOPILOT_LIMIT_FRACTION``) or reached the old one's (planned again, it may go faster)."""
-    a, b = old.autopilot, new.autopilot
-    changed = {f.name for f in dataclasses.fields(AutopilotLimits)
-               if (getattr(a, f.name) if a else None) != (getattr(b, f.name) if b else None)}  # fmt: skip
-    if changed - SPEED_FIELDS - {"name"}:
-        return True
-    lim_old, lim_new = plan_limits(old), plan_limits(new)
-    for traj in trajs:
-        vd = traj.df["vd_mps"].to_numpy(float)
-        peaks = {"descent_max_mps": float(np.nanmax(vd, initial=0.0)),
-                 "climb_max_mps": float(np.nanmax(-vd, initial=0.0))}  # fmt: skip
-        for f in changed & SPEED_FIELDS:
-            cap_old, cap_new = getattr(lim_old, f), getattr(lim_new, f)
-            if cap_new is not None and peaks[f] > cap_new + 1e-9:
-                return True
-            if cap_old is not None and peaks[f] >= cap_old - BINDING_MPS:
-                return True
-    return False
+def plans_bound(old: VehicleProfile, new: VehicleProfile) -> bool:
+    """Whether plans made for ``old`` must be made again for ``new``: the limits a flown plan keeps within
+    (``plan_limits``) differ. PX4's never bound a flown plan, so its speeds change only the optimum."""
+    return plan_limits(old) != plan_limits(new)

@@ -653,14 +653,14 @@ class MissionRunner:
     async def _plan_within(self, live: dict[str, LiveLimit], autopilot: str) -> None:
         """Plan the mission again within the vehicle's own limits (ArduCopter's GUIDED shaping, PX4's vertical
         speeds) where they differ from the profile's (``flighttest.flying.live_limits``): a limit raised for the
-        test day lets the plan go faster, one lowered keeps it flyable. Plans that a change of speed limits does
-        not touch are kept, their optimum made again for the vehicle as it is. A trajectory file is flown as it
-        is (the preflight judges it)."""
+        test day lets the plan go faster, one lowered keeps it flyable. Where only PX4's differ, the plans stand
+        and their optimum is made again for the vehicle as it is. A trajectory file is flown as it is (the
+        preflight judges it)."""
         req = self.req
         profile, diffs = with_live_limits(req.profile, live, autopilot)
         if not diffs or req.replan is None:
             return
-        if not plans_bound([self.traj, *req.wind_plans], req.profile, profile):
+        if not plans_bound(req.profile, profile):
             # the yardstick is the vehicle's: an optimum faster than its autopilot lets it fly is not one
             # (PX4's helix optimum 2.90 s without MPC_Z_VEL_MAX_DN, 3.96 s within its 1.5 m/s: bench/RESULTS.md)
             self.event("live_limits", changed=diffs, replanned=False)
