@@ -40,6 +40,9 @@ def assert_build_up(out: Path, summary: dict, most: int) -> dict[str, list[dict]
             budget = json.loads((out / Path(r["plan"]).with_suffix(".json")).read_text())["margin_budget"]
             terms = {t["name"]: t["value_mps"] for t in budget["terms"]}
             assert set(terms) == {"tracking", "estimate", "reserve"}, budget
+            # the estimate's error beyond what the guard's own margin covers (the profile's [vrs] margin_mps)
+            estimate = next(t for t in budget["terms"] if t["name"] == "estimate")
+            assert "less the guard's own margin" in estimate["source"], estimate
             assert budget["margin_mps"] == r["margin_mps"]
             # never optimistic: at least what the evidence measured and the floor
             assert r["margin_mps"] >= max(sum(terms.values()), cfg.build_up.floor_mps) - 1e-3, budget

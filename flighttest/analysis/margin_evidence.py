@@ -5,14 +5,17 @@ From a flight's log folder (docs/CONTRACTS.md "Flight log folders"):
 - **the guard's least margin over the descent** (``guard.csv`` ``margin_mps`` from ``stream_start`` to
   ``stream_end``): how close the estimated state came to the guard's bound, the wind's uncertainty
   included, and whether the guard said anything but ``ok`` there; beside it the plan's own least margin
-  (``preflight.json``): what the flight used is the difference;
+  (``preflight.json``): what the flight used is the difference. The guard also acts on its prediction (a
+  horizon ahead along the vehicle's trend) beyond its clear-violation band, so how close it came to acting is
+  the least of the two (``min_acting_margin_mps``): PX4 SITL's vertical kept 0.126 m/s measured and 0.057 m/s
+  predicted, and the next one, planned on the 0.126, aborted on its prediction (bench/RESULTS.md);
 - **the tracking error**: the estimated velocity against the plan's, over the descent (95th percentile
   of the difference's magnitude), from ``flighttest.analysis.plan_track``;
 - **the estimate's error**: the estimator's climb rate against the barometer's, in 2 s windows over the
-  whole time in the air, twice its RMS (the barometer's own noise taken out). Holding its estimated
-  height, a vehicle whose velocity estimate is off really moves, and the barometer sees it; in the
-  descent the two disagree by the estimate's error. One snapshot (the hover before the descent, as first
-  tried) caught 0.13 m/s of an error that reached 0.27 m/s in the descent that followed on the fake's
+  whole time in the air, twice its RMS (the barometer's own noise taken out; :func:`estimate_error`).
+  Holding its estimated height, a vehicle whose velocity estimate is off really moves, and the barometer
+  sees it; in the descent the two disagree by the estimate's error. One snapshot (the hover before the
+  descent, as first tried) caught 0.13 m/s of an error that reached 0.27 m/s in the descent that followed on the fake's
   PX4 (bench/RESULTS.md, "The build-up"). A log without a barometer has none: the budget then keeps its
   default.
 
@@ -54,6 +57,8 @@ class MarginEvidence:
     estimate_source: str  # which barometer, or why not measured
     hover_to_hover_s: float | None
     flown_over_optimum: float | None
+    # the least of min_margin_mps and the guard's predicted margin beyond its clear-violation band (where it acts)
+    min_acting_margin_mps: float | None = None
 
     @property
     def guard_silent(self) -> bool:
@@ -93,28 +98,60 @@ def guard_over(guard: pd.DataFrame, t0_s: float, t1_s: float) -> tuple[float | N
     return (float(margins.min()) if margins.size else None), flags
 
 
+def acting_over(guard: pd.DataFrame, t0_s: float, t1_s: float, clear_violation_mps: float) -> float | None:
+    """How close the guard came to acting over ``[t0_s, t1_s]``: the least of its margin and of its predicted
+    margin plus the clear-violation band (a prediction acts only beyond it: ``flighttest.flying.guard``)."""
+    rows = guard[(guard["t_s"] >= t0_s) & (guard["t_s"] <= t1_s)]
+    m = pd.to_numeric(rows["margin_mps"], errors="coerce").to_numpy(float)
+    if "predicted_margin_mps" in rows:
+        p = pd.to_numeric(rows["predicted_margin_mps"], errors="coerce").to_numpy(float) + clear_violation_mps
+        m = np.concatenate([m, p])
+    m = m[np.isfinite(m)]
+    return float(m.min()) if m.size else None
+
+
+def _clear_violation(folder: Path) -> float:
+    """The guard's clear-violation band the flight flew with (``meta.json``), else the default."""
+    from flighttest.flying.missions_config import GuardConfig
+
+    try:
+        v = json.loads((folder / "meta.json").read_text(encoding="utf-8"))["config"]["guard"]["clear_violation_mps"]
+    except (OSError, ValueError, KeyError, TypeError):
+        v = None
+    ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+    return float(v) if ok else GuardConfig().clear_violation_mps
+
+
 def estimate_error(t_s: np.ndarray, vd_mps: np.ndarray, baro_t_s: np.ndarray, baro_alt_m: np.ndarray,
                    t0_s: float, t1_s: float, window_s: float = WINDOW_S) -> float | None:  # fmt: skip
     """Twice the RMS disagreement between the estimator's climb rate and the barometer's over ``[t0_s, t1_s]``:
-    in windows of ``window_s`` (half overlapping), the barometer's least-squares rate against the estimator's
-    mean (the same window average of the same true velocity, even while it changes), the barometer's own noise
-    (each fit's standard error) taken out in quadrature. None with fewer than ``MIN_WINDOWS`` windows of at
-    least ``MIN_BARO_SAMPLES`` barometer samples."""
+    in windows of ``window_s`` (half overlapping), the least-squares rate of the barometer's height less the
+    height the estimator's own velocity climbs, at the barometer's samples (the same weighting of the same
+    true velocity: a least-squares slope weighs a window's middle, a mean weighs it evenly, and through a
+    helix's speed changes the two differ by up to 0.2 m/s), the barometer's own noise (each fit's standard
+    error) taken out in quadrature. None with fewer than ``MIN_WINDOWS`` windows of at least
+    ``MIN_BARO_SAMPLES`` barometer samples."""
+    ok = np.isfinite(t_s) & np.isfinite(vd_mps)
+    t, vd = t_s[ok], vd_mps[ok]
+    if t.size < 2:
+        return None
+    climbed_m = np.concatenate([[0.0], np.cumsum(-0.5 * (vd[1:] + vd[:-1]) * np.diff(t))])
     d2, se2 = [], []
     for a in np.arange(t0_s, t1_s - window_s + 1e-9, window_s / 2.0):
         b = (baro_t_s >= a) & (baro_t_s < a + window_s) & np.isfinite(baro_alt_m)
-        e = (t_s >= a) & (t_s < a + window_s) & np.isfinite(vd_mps)
+        e = (t >= a) & (t < a + window_s)
         if b.sum() < MIN_BARO_SAMPLES or e.sum() < 2:
             continue
         x = baro_t_s[b] - baro_t_s[b].mean()
         sxx = float((x * x).sum())
         if sxx <= 0:
             continue
-        y = baro_alt_m[b] - baro_alt_m[b].mean()
+        y = baro_alt_m[b] - np.interp(baro_t_s[b], t, climbed_m)
+        y = y - y.mean()
         slope = float((x * y).sum() / sxx)
         resid = y - slope * x
         se2.append(float((resid * resid).sum()) / max(int(b.sum()) - 2, 1) / sxx)
-        d2.append((-float(np.mean(vd_mps[e])) - slope) ** 2)
+        d2.append(slope**2)
     if len(d2) < MIN_WINDOWS:
         return None
     return 2.0 * math.sqrt(max(0.0, float(np.mean(d2)) - float(np.mean(se2))))
@@ -175,7 +212,8 @@ def flight_evidence(log_dir: Path | str) -> MarginEvidence:
         raise FlighttestError(f"{folder}: no guard.csv: not a flighttest flight folder")
     events = _events(folder)
     t0, t1 = _event_t(events, "stream_start"), _event_t(events, "stream_end")
-    guard = pd.read_csv(guard_path, usecols=["t_s", "verdict", "margin_mps", "action"])
+    wanted = {"t_s", "verdict", "margin_mps", "predicted_margin_mps", "action"}
+    guard = pd.read_csv(guard_path, usecols=lambda c: c in wanted)
     guard["t_s"] = pd.to_numeric(guard["t_s"], errors="coerce")
     aborts = int((guard["action"].astype(str) == "abort").sum())
     summary: dict[str, Any] = {}
@@ -194,6 +232,7 @@ def flight_evidence(log_dir: Path | str) -> MarginEvidence:
                               estimate_source="no descent was flown")  # fmt: skip
     t1 = t1 if t1 is not None else float(guard["t_s"].max())
     least, flags = guard_over(guard, t0, t1)
+    acting = acting_over(guard, t0, t1, _clear_violation(folder))
     log = load_log(folder)
     tracking = _tracking(log)
     estimate, source = None, "no barometer in the log"
@@ -209,7 +248,7 @@ def flight_evidence(log_dir: Path | str) -> MarginEvidence:
         if estimate is None or value > estimate:  # two barometers: the worse disagreement
             estimate, source = value, f"2 × the RMS of the estimator's climb rate less {h.name}'s, in the air"
     return MarginEvidence(**base, min_margin_mps=least, guard_flags=flags, tracking_mps=tracking,
-                          estimate_mps=estimate, estimate_source=source)  # fmt: skip
+                          estimate_mps=estimate, estimate_source=source, min_acting_margin_mps=acting)  # fmt: skip
 
 
 def no_evidence(outcome: str | None) -> MarginEvidence:

@@ -7,11 +7,15 @@ vehicle with no history flies today's conservative margins); each next one plans
 (:mod:`flighttest.analysis.margin_evidence`):
 
 - **tracking**: the most margin a flight used, its plan's own least margin to the guard's bound (the
-  preflight's) less the least margin the guard saw (the guard's margin takes in the wind's uncertainty, so a
-  windier flight proves less);
-- **estimate**: the estimator's error against the barometer in the hover before the descent (the most
-  any flight measured), else ``estimate_default_mps``: the guard judges the estimate, the truth may be
-  this far beyond it;
+  preflight's) less how close the guard came to acting: its least margin, or its prediction's beyond the
+  clear-violation band where lower (the guard's margin takes in the wind's uncertainty, so a windier flight
+  proves less);
+- **estimate**: the estimator's error against the barometer over the time in the air (the most any of
+  the vehicle's flights measured), else ``estimate_default_mps``: the guard judges the estimate, the truth
+  may be this far beyond it. Only what the guard's own margin (the profile's ``[vrs] margin_mps``) does not
+  already cover: the plan's margin sits on top of it, and the vehicle flies its estimate, so the estimate's
+  error moves the truth, not what the guard sees (PX4 and ArduCopter SITL: the truth within 0.01 m/s of the
+  guard's least margin, bench/RESULTS.md "The build-up's evidence, judged against the simulators' truth");
 - **reserve**: a constant on top.
 
 The next margin is their sum, never below ``floor_mps`` and never more than ``max_narrow_fraction``
@@ -135,9 +139,15 @@ class BuildUpFlight:
         return self.margin_mps if p is None else p
 
     @property
+    def least_mps(self) -> float | None:
+        """How close the guard came to acting: its least margin, its prediction included where the log has it."""
+        e = self.evidence
+        return e.min_margin_mps if e.min_acting_margin_mps is None else e.min_acting_margin_mps
+
+    @property
     def used_mps(self) -> float | None:
         """The margin this flight used: the plan's least less the guard's least (None without a guard log)."""
-        least = self.evidence.min_margin_mps
+        least = self.least_mps
         return None if least is None else self.planned_least_mps - least
 
     def row(self) -> dict[str, Any]:
@@ -146,7 +156,8 @@ class BuildUpFlight:
         return {"flight": self.k, "margin_mps": round(self.margin_mps, 4), "outcome": e.outcome,
                 "hover_to_hover_s": e.hover_to_hover_s, "flown_over_optimum": e.flown_over_optimum,
                 "plan_min_margin_mps": self.planned_least_mps, "min_margin_mps": e.min_margin_mps,
-                "used_mps": self.used_mps, "tracking_mps": e.tracking_mps,
+                "min_acting_margin_mps": e.min_acting_margin_mps, "used_mps": self.used_mps,
+                "tracking_mps": e.tracking_mps,
                 "estimate_mps": e.estimate_mps, "guard_silent": e.guard_silent, "log_dir": e.log_dir,
                 "plan": self.plan}  # fmt: skip
 
@@ -162,13 +173,15 @@ class BuildUpFlight:
 
 
 def next_budget(key: str, flights: list[BuildUpFlight], cfg: BuildUpConfig, caps: dict[str, float] | None = None,
-                estimates: tuple[tuple[float, str], ...] = ()) -> MarginBudget:  # fmt: skip
+                estimates: tuple[tuple[float, str], ...] = (),
+                guard_margin_mps: float = 0.0) -> MarginBudget:  # fmt: skip
     """The margin the next flight plans with, from every flight so far (the last one's margin when none of
     them has a guard log to judge by), and its tracking room: the last flight's, each key of ``caps`` widened by
     ``expand_fraction`` (up to its cap) when that flight completed with the guard silent and its least margin
     kept the estimate's error and the reserve. ``estimates``: the estimate's error the vehicle's other flights
     measured (value, where), which the estimate term takes too: the estimator is the vehicle's, not the
-    descent's (PX4 SITL's helix read 0.000 m/s where its verticals just before read 0.049 and 0.073)."""
+    descent's (PX4 SITL's helix read 0.000 m/s where its verticals just before read 0.049 and 0.073).
+    ``guard_margin_mps``: the guard's own margin, which covers that much of the estimate's error."""
     last = flights[-1]
     used = [(f, f.used_mps) for f in flights if f.used_mps is not None]
     if not used:
@@ -177,15 +190,20 @@ def next_budget(key: str, flights: list[BuildUpFlight], cfg: BuildUpConfig, caps
     f_t, tracking = max(used, key=lambda fu: fu[1])
     tracking = max(0.0, tracking)
     terms = [MarginTerm("tracking", tracking, f"flight {f_t.k}'s plan kept {f_t.planned_least_mps:.3f} m/s from the "
-                        f"guard's bound, the guard's least margin was {f_t.evidence.min_margin_mps:.3f} m/s "
-                        f"({f_t.evidence.log_dir})")]  # fmt: skip
+                        f"guard's bound, the guard came within {f_t.least_mps:.3f} m/s of acting (its least "
+                        f"margin {f_t.evidence.min_margin_mps:.3f} m/s; {f_t.evidence.log_dir})")]  # fmt: skip
     measured = [(float(f.evidence.estimate_mps), f"flight {f.k}: {f.evidence.estimate_source}")
                 for f in flights if f.evidence.estimate_mps is not None] + list(estimates)  # fmt: skip
     if measured:
-        terms.append(MarginTerm("estimate", *max(measured, key=lambda m: m[0])))
+        error, source = max(measured, key=lambda m: m[0])
     else:
-        terms.append(MarginTerm("estimate", cfg.estimate_default_mps,
-                                f"not measured ({last.evidence.estimate_source}): [build_up] estimate_default_mps"))
+        error = cfg.estimate_default_mps
+        source = f"not measured ({last.evidence.estimate_source}): [build_up] estimate_default_mps"
+    beyond = max(0.0, error - guard_margin_mps)
+    if guard_margin_mps > 0:
+        source = (f"{error:.3f} m/s ({source}) less the guard's own margin, {guard_margin_mps:.3f} m/s, which "
+                  f"covers {error - beyond:.3f} of it")  # fmt: skip
+    terms.append(MarginTerm("estimate", beyond, source))
     terms.append(MarginTerm("reserve", cfg.reserve_mps, "[build_up] reserve_mps"))
     evidence = sum(t.value_mps for t in terms)
     step = last.margin_mps * (1.0 - cfg.max_narrow_fraction)
@@ -198,7 +216,8 @@ def next_budget(key: str, flights: list[BuildUpFlight], cfg: BuildUpConfig, caps
         note = "the evidence"
     room = dict(last.budget.expanded)
     e = last.evidence
-    kept = e.min_margin_mps is not None and e.min_margin_mps >= evidence - tracking  # the estimate and the reserve
+    least = last.least_mps
+    kept = least is not None and least >= evidence - tracking  # the estimate and the reserve
     if e.outcome == "completed" and e.guard_silent and kept:
         room = {k: min(cap, room[k] * (1.0 + cfg.expand_fraction)) for k, cap in (caps or {}).items() if k in room}
         room = {**dict(last.budget.expanded), **room}

@@ -283,7 +283,8 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
     flights = _build_up_so_far(record, plan_id)
     others = _estimates_elsewhere(ctx, mission)
     budget = config_budget(mission, cfg0) if not flights else next_budget(key, flights, rules,
-                                                                          expand_caps(mission, profile), others)
+                                                                          expand_caps(mission, profile), others,
+                                                                          profile.vrs.margin_mps)
     fixed = mission == "helix" and bool(cfg0.plan.get("trajectory"))  # a planned file flies as planned
     # resumed: the flights so far may already end it (a smaller N this time)
     why = stop_reason(flights, budget, ctx.build_up, rules) if flights else None
@@ -331,7 +332,7 @@ def _build_up(ctx: StepContext, mission: str, profile: VehicleProfile, module: A
         evidence = flight_evidence(rec["log_dir"]) if rec.get("log_dir") else no_evidence(rec.get("outcome"))
         flights.append(BuildUpFlight(k, budget, evidence, str(path), rec))
         halved = False
-        budget = next_budget(key, flights, rules, expand_caps(mission, live), others)
+        budget = next_budget(key, flights, rules, expand_caps(mission, live), others, live.vrs.margin_mps)
         why = ("the helix flies a planned file ([plan] trajectory): nothing to narrow" if fixed
                else stop_reason(flights, budget, ctx.build_up, rules))  # fmt: skip
         _write_build_up(record, plan_id, flights, why)

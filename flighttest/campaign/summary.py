@@ -119,6 +119,7 @@ BUILD_UP_COLUMNS = (  # the report's build-up table: header, key, format
     ("flight", "flight", "{}"), ("margin m/s", "margin_mps", "{:.3f}"), ("outcome", "outcome", "{}"),
     ("hover→hover s", "hover_to_hover_s", "{:.2f}"), ("÷ optimum", "flown_over_optimum", "{:.2f}"),
     ("plan's least margin m/s", "plan_min_margin_mps", "{:.3f}"), ("guard's least m/s", "min_margin_mps", "{:.3f}"),
+    ("to acting m/s", "min_acting_margin_mps", "{:.3f}"),
     ("used m/s", "used_mps", "{:.3f}"),
     ("estimate error m/s", "estimate_mps", "{:.3f}"), ("guard silent", "guard_silent", "{}"),
 )  # fmt: skip
