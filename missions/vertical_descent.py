@@ -2,7 +2,8 @@
 
 Cruise at ``w_allow − margin − extra_margin`` (inside the guard's own bound, so it stays silent), accelerating and
 braking within the vehicle's limits and, for a profile with an ``[autopilot]`` table, within the autopilot's
-(``flighttest.planner.vertical``). Edit ``vertical_descent.toml`` or copy this file.
+(``flighttest.planner.vertical``), the acceleration changing at most at ``jerk_max_mps3``. Edit
+``vertical_descent.toml`` or copy this file.
 
     python missions/vertical_descent.py --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
     flighttest fly vertical --connect udpout://127.0.0.1:14580 --vehicle x500 --yes
@@ -28,6 +29,7 @@ def plan(profile: VehicleProfile, cfg: MissionConfig) -> Trajectory:
         # the guard's own bound minus a tracking margin, so the guard stays silent
         margin_mps=profile.vrs.margin_mps + p.extra_margin_mps,
         accel_fraction=p.accel_fraction,
+        jerk_mps3=p.jerk_max_mps3,
     )
     return vertical_trajectory(vp, profile.name, profile.mass_kg)
 

@@ -20,6 +20,7 @@ from flighttest.errors import FlighttestError
 from flighttest.flying import autopilot as flying_autopilot
 from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
 from flighttest.flying.missions_config import load_mission_config
+from flighttest.flying.plan_config import VerticalPlanConfig
 from flighttest.flying.preflight import FAIL, ardupilot_param_checks, trajectory_stats
 from flighttest.model.aero import G_MPS2
 from flighttest.model.profiles import (
@@ -198,6 +199,24 @@ def test_vertical_ramps_its_acceleration_at_the_autopilots_jerk(ac):
     assert steps.problem["jerk_z_mps3"] is None and steps.ad_mps2[0] == pytest.approx(FRACTION * 1.0)
 
 
+def test_the_missions_jerk_bounds_the_vertical_on_any_autopilot(x500, ac):
+    """PX4 shapes nothing in offboard: the vertical's own jerk keeps its entry into cruise gradual, where a step
+    read 0.1·a above the cruise in the guard's prediction and aborted PX4 SITL's vertical (bench/RESULTS.md)."""
+    jerk = VerticalPlanConfig().jerk_max_mps3
+    for profile, expected in ((x500, jerk), (ac, min(jerk, FRACTION * 5.0))):
+        plan = vertical_plan(profile, 5.0, extra_margin_mps=0.1, accel_fraction=0.25, jerk_mps3=jerk)
+        t, a = plan.t_s, plan.ad_mps2
+        assert plan.problem["jerk_z_mps3"] == pytest.approx(expected)
+        assert np.abs(np.diff(a[:-1]) / np.diff(t[:-1])).max() <= expected + 1e-6
+        assert a[0] == 0.0 and plan.vd_mps.max() == pytest.approx(plan.cruise_mps)
+    # and it costs at most the ramps' a/J (less where the ramp never reaches a)
+    step = vertical_plan(x500, 5.0, extra_margin_mps=0.1, accel_fraction=0.25)
+    ramped = vertical_plan(x500, 5.0, extra_margin_mps=0.1, accel_fraction=0.25, jerk_mps3=jerk)
+    assert 0.0 < ramped.t_f_s - step.t_f_s <= 0.5 * (step.a_down_mps2 + step.a_up_mps2) / jerk + 1e-9
+    with pytest.raises(FlighttestError, match="jerk must be a positive number"):
+        plan_vertical(x500, 5.0, jerk_mps3=0.0)
+
+
 def test_vertical_unchanged_without_the_table(x500):
     plan = plan_vertical(x500, 5.0)
     assert plan.a_down_mps2 == 0.8 * x500.max_accel_down_mps2 and plan.a_up_mps2 == 0.8 * x500.max_accel_up_mps2
@@ -306,8 +325,9 @@ def test_plan_vertical_cli_on_arducopter_sitl(ac, tmp_path):
     traj = Trajectory.load(f"{out}.csv", ac)
     assert np.abs(traj.column("ad_mps2")).max() <= FRACTION * 1.0 + 1e-9
     assert _guided_failures(ac, "vertical", traj) == []
-    expected = vertical_trajectory(vertical_plan(ac, 3.0, extra_margin_mps=0.35, accel_fraction=0.15), ac.name,
-                                   ac.mass_kg)  # fmt: skip
+    expected = vertical_trajectory(vertical_plan(ac, 3.0, extra_margin_mps=0.35, accel_fraction=0.15,
+                                                 jerk_mps3=VerticalPlanConfig().jerk_max_mps3),
+                                   ac.name, ac.mass_kg)  # fmt: skip
     assert traj.duration_s == pytest.approx(expected.duration_s)
 
 

@@ -261,7 +261,7 @@ def test_ardupilot_defaults_are_refused_before_arming_with_the_value_to_set(tmp_
     f = fly(tmp_path, autopilot=ARDUPILOT)
     assert f.outcome.outcome == "refused" and f.outcome.exit_code == 2
     assert f.outcome.abort_reason.startswith("preflight failed: WP_ACC_Z: 1 m/s²")
-    assert "set WP_ACC_Z to 1.5" in f.outcome.abort_reason
+    assert "set WP_ACC_Z to 1.3" in f.outcome.abort_reason  # the vertical's peak, ramped at its jerk
     assert "arm" not in [c for _, c in f.ap.commands]
     checks = {c["name"]: c for c in f.summary["preflight"]["checks"]}
     assert checks["FS_GCS_ENABLE"]["status"] == "warn" and checks["MAV_GCS_SYSID"]["status"] == "warn"
@@ -274,7 +274,7 @@ def test_older_ardupilot_names_are_refused_with_the_value_to_set_in_their_own_un
     f = fly(tmp_path, autopilot=ARDUPILOT, params={**params, "WPNAV_ACCEL_Z": 100.0, "WPNAV_SPEED_DN": 150.0})
     assert f.outcome.outcome == "refused"  # a trajectory file (no replan): judged as it is
     assert f.outcome.abort_reason.startswith("preflight failed: WPNAV_ACCEL_Z: 1 m/s²")
-    assert "set WPNAV_ACCEL_Z to 150" in f.outcome.abort_reason  # cm/s², as that firmware holds it
+    assert "set WPNAV_ACCEL_Z to 130" in f.outcome.abort_reason  # cm/s², as that firmware holds it
     checks = {c["name"]: c for c in f.summary["preflight"]["checks"]}
     assert checks["WPNAV_SPEED_DN"]["status"] == "pass" and checks["WPNAV_SPEED_DN"]["value"] == "1.5 m/s"
 

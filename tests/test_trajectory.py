@@ -150,6 +150,9 @@ def test_sample_times_never_print_two_rows_at_one_time(tmp_path):
 
     t = sample_times(50.000000001, 100.0, (1.0 / 9.0, 50.000000001))
     assert t[0] == 0.0 and 50.000000001 in t and np.diff(t).min() >= SAMPLE_MIN_GAP_FRACTION / 100.0
+    # two boundaries 1e-13 s apart (a jerk-limited ramp that never reaches its acceleration) are one
+    t = sample_times(1.0, 100.0, (0.3152260000001, 0.315226, 0.5))
+    assert np.diff(t).min() >= SAMPLE_MIN_GAP_FRACTION / 100.0 and np.sum(np.abs(t - 0.315226) < 1e-9) == 1
     ac = load_profile("arducopter_sitl")
     vp = plan_vertical(ac, height_m=5.0, w_allow_mps=0.5499999999999998, margin_mps=0.44999999999999996,
                        accel_fraction=0.15)  # fmt: skip
@@ -157,3 +160,8 @@ def test_sample_times_never_print_two_rows_at_one_time(tmp_path):
     traj.save(tmp_path / "vertical.csv")
     again = Trajectory.load(tmp_path / "vertical.csv")
     assert again.duration_s == pytest.approx(vp.t_f_s)
+    # the x500's at the mission's jerk, whose ramps never reach their acceleration (the fast lane's first catch)
+    x500 = load_profile("x500")
+    vp = plan_vertical(x500, height_m=120.0, margin_mps=0.45, accel_fraction=0.15, jerk_mps3=4.0)
+    vertical_trajectory(vp, x500.name, x500.mass_kg).save(tmp_path / "v120.csv")
+    assert Trajectory.load(tmp_path / "v120.csv").duration_s == pytest.approx(vp.t_f_s)

@@ -473,6 +473,7 @@ def cmd_vertical(args: argparse.Namespace) -> int:
         profile, height, w_allow_mps=args.w_allow, margin_mps=args.margin,
         extra_margin_mps=args.extra_margin if args.extra_margin is not None else vp.extra_margin_mps,
         accel_fraction=args.accel_fraction if args.accel_fraction is not None else vp.accel_fraction,
+        jerk_mps3=vp.jerk_max_mps3,
     )  # fmt: skip
     traj = vertical_trajectory(plan, profile.name, profile.mass_kg)
     _basis(traj, cfg)

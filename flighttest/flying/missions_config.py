@@ -212,6 +212,7 @@ _PLAN: dict[str, dict[str, Range | str]] = {
         "descent_m": HEIGHT_M,
         "accel_fraction": FRACTION,
         "extra_margin_mps": MARGIN_MPS,
+        "jerk_max_mps3": Range(0.0, 1000.0, "m/s³", lo_open=True),
     },
     "probe": {
         "amplitude_m": HEIGHT_M,

@@ -64,6 +64,10 @@ class VerticalPlanConfig:
     accel_fraction: float = 0.15
     # cruise this far below the guard's bound (PX4's descent-rate estimate is off by 0.1-0.15 m/s, peaks 0.3)
     extra_margin_mps: float = 0.35
+    # the acceleration changes no faster (and no faster than the autopilot's own limit): the guard predicts 0.1 s
+    # ahead along the vehicle's trend, and a step into cruise read as 0.1·a above it aborted PX4 SITL's vertical
+    # (bench/RESULTS.md, "The vertical's entry into cruise")
+    jerk_max_mps3: float = 4.0
 
     @classmethod
     def from_table(cls, plan: dict[str, Any]) -> VerticalPlanConfig:

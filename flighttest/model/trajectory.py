@@ -494,7 +494,11 @@ def sample_times(t_f_s: float, rate_hz: float, breaks_s: tuple[float, ...] = ())
     if t_f_s * rate_hz + len(breaks_s) + 1 > MAX_ROWS:
         raise FlighttestError(f"trajectory sampling: {t_f_s:.6g} s at {rate_hz:g} Hz is more than {MAX_ROWS:,} rows")
     grid = np.arange(0.0, t_f_s, 1.0 / rate_hz)
-    keys = np.array([*breaks_s, t_f_s], dtype=float)
-    near = np.min(np.abs(grid[:, None] - keys[None, :]), axis=1) < SAMPLE_MIN_GAP_FRACTION / rate_hz
+    gap = SAMPLE_MIN_GAP_FRACTION / rate_hz
+    # boundaries that (nearly) coincide are one: a jerk-limited ramp that never reaches its acceleration has
+    # its two corners 1e-12 s apart, one time in a file written to 9 digits
+    keys = np.array([k for k in sorted(breaks_s) if k < t_f_s - gap] + [t_f_s], dtype=float)
+    keys = keys[np.concatenate([np.diff(keys) >= gap, [True]])]
+    near = np.min(np.abs(grid[:, None] - keys[None, :]), axis=1) < gap
     near[0] = False  # the start stays: every boundary lies after it
     return np.union1d(grid[~near], keys)

@@ -137,12 +137,12 @@ def helix_problem(
 
 def vertical_plan(profile: VehicleProfile, height_m: float, *, w_allow_mps: float | None = None,
                   margin_mps: float | None = None, extra_margin_mps: float = 0.0,
-                  accel_fraction: float = 0.8) -> VerticalPlan:  # fmt: skip
+                  accel_fraction: float = 0.8, jerk_mps3: float | None = None) -> VerticalPlan:  # fmt: skip
     """The vertical baseline (``vertical.plan_vertical``) cruising ``extra_margin_mps`` inside the
     guard's bound on top of its margin (``margin_mps``, default the profile's): room for the
     autopilot's tracking error."""
     margin = (profile.vrs.margin_mps if margin_mps is None else margin_mps) + extra_margin_mps
-    return plan_vertical(profile, height_m, w_allow_mps, margin, accel_fraction)
+    return plan_vertical(profile, height_m, w_allow_mps, margin, accel_fraction, jerk_mps3=jerk_mps3)
 
 
 def vertical_constraint(profile: VehicleProfile, plan: VerticalPlan) -> VelocityConstraint:

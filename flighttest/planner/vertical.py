@@ -45,10 +45,11 @@ class VerticalPlan:
 
 def plan_vertical(profile: VehicleProfile, height_m: float = 5.0, w_allow_mps: float | None = None,
                   margin_mps: float | None = None, accel_fraction: float = 0.8, wind_d_mps: float = 0.0,
-                  rate_hz: float = 100.0,
-                  limit_fraction: float = AUTOPILOT_LIMIT_FRACTION) -> VerticalPlan:  # fmt: skip
+                  rate_hz: float = 100.0, limit_fraction: float = AUTOPILOT_LIMIT_FRACTION,
+                  jerk_mps3: float | None = None) -> VerticalPlan:  # fmt: skip
     """Closed-form profile sampled at ``rate_hz`` (plus the exact switching times), within
-    ``limit_fraction`` of the autopilot's limits when the profile names them (``autopilot_limits.plan_limits``)."""
+    ``limit_fraction`` of the autopilot's limits when the profile names them (``autopilot_limits.plan_limits``);
+    the acceleration changes no faster than ``jerk_mps3`` (None: as fast as the autopilot's limit allows)."""
     if not (math.isfinite(height_m) and height_m > 0):
         raise FlighttestError(f"vertical plan: height must be a positive number (got {height_m!r})")
     if not 0 < accel_fraction <= 1:
@@ -65,7 +66,9 @@ def plan_vertical(profile: VehicleProfile, height_m: float = 5.0, w_allow_mps: f
         )
     a_dn = capped(accel_fraction * profile.max_accel_down_mps2, limits.accel_z_max_mps2)
     a_up = capped(accel_fraction * profile.max_accel_up_mps2, limits.accel_z_max_mps2)
-    jerk = limits.jerk_z_max_mps3 or math.inf
+    if jerk_mps3 is not None and not (math.isfinite(jerk_mps3) and jerk_mps3 > 0):
+        raise FlighttestError(f"vertical plan: jerk must be a positive number (got {jerk_mps3!r})")
+    jerk = min(limits.jerk_z_max_mps3 or math.inf, jerk_mps3 or math.inf)
     cruise_cap = cruise
     if _ramps(cruise, a_dn, a_up, jerk)[2] > height_m:  # too short to reach cruise: the fastest peak that fits
         lo, hi = 0.0, cruise
