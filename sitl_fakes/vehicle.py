@@ -26,6 +26,9 @@ from sitl_fakes.wind import Wind
 
 # PX4 offboard: the mode is available while setpoints arrive; a > 2 Hz stream means one within 0.5 s.
 OFFBOARD_SIGNAL_FRESH_S = 0.5
+# PX4 will not arm in these (ModeUtil/mode_requirements.cpp: mode_req_prevent_arming, "Mode not suitable for
+# arming"): disarmed in Land after an abort, PX4 SITL reported not armable until the mode changed
+PREVENT_ARMING = frozenset({Mode.LAND, Mode.RTL})
 TAKEOFF_ACCEPT_M = 0.05
 RTL_ACCEPT_M = 1.0
 RTL_SPEED_MPS = 5.0
@@ -95,7 +98,8 @@ class FakePx4:
         self.params["MPC_THR_HOVER"].value = prof.mass_kg * G_MPS2 / (prof.n_rotors * prof.max_thrust_per_rotor_n)
         self.param_names = sorted(self.params)
         self.mode = Mode.HOLD
-        self.user_mode = Mode.HOLD  # the mode last asked for (DO_SET_MODE): PX4 returns to it after a landing
+        # the last mode asked for (DO_SET_MODE) that PX4 arms in: it returns to it when it disarms after a landing
+        self.user_mode = Mode.HOLD
         self.armed = False
         self.crashed = False
         self.crash_reason = ""
@@ -125,10 +129,10 @@ class FakePx4:
         return self.t_s >= self.cfg.gps_delay_s
 
     def armable(self) -> bool:
-        """PX4's prearm check as far as the fake models it: a position, no crash, and not Offboard
-        without a live setpoint stream."""
+        """PX4's prearm check as far as the fake models it: a position, no crash, not Offboard without a live
+        setpoint stream, and not in a mode PX4 will not arm in (Land, Return: ``PREVENT_ARMING``)."""
         offboard_dead = self.mode is Mode.OFFBOARD and self.now_wall() - self.last_sp_time > OFFBOARD_SIGNAL_FRESH_S
-        return self.position_valid() and not self.crashed and not offboard_dead
+        return self.position_valid() and not self.crashed and not offboard_dead and self.mode not in PREVENT_ARMING
 
     def landed(self) -> bool:
         return self.body.state.on_ground
@@ -255,10 +259,11 @@ class FakePx4:
                 self.disarm("no takeoff within COM_DISARM_PRFLT")
             elif self.has_flown and self.now - self.ground_since > self.p("COM_DISARM_LAND") > 0:
                 self.disarm("landed")
-                if self.user_mode is Mode.OFFBOARD:
-                    # PX4 goes back to the mode asked for: Offboard, which without a setpoint stream is
-                    # not armable (../shared/px4_sih: "reports the last mode (OFFBOARD) on the ground")
-                    self.set_mode(Mode.OFFBOARD, "landed: back to the mode last asked for")
+                if self.user_mode is not self.mode:
+                    # PX4 goes back to the last mode asked for that it arms in (UserModeIntention::onDisarm):
+                    # Offboard after a flight, which without a setpoint stream is not armable either
+                    # (../shared/px4_sih: "reports the last mode (OFFBOARD) on the ground"); Hold after an abort
+                    self.set_mode(self.user_mode, "landed: back to the mode last asked for")
 
     def _offboard_lost(self) -> None:
         action = int(self.p("COM_OBL_RC_ACT"))
@@ -401,8 +406,7 @@ class FakePx4:
         if cmd == mavlink.MAV_CMD_NAV_TAKEOFF:
             return self._cmd_takeoff(p)
         if cmd == mavlink.MAV_CMD_NAV_LAND:
-            if not self.armed:
-                return TEMP_REJECTED, "not armed"
+            # accepted disarmed too: PX4 SITL then sat in Land, where it does not arm (PREVENT_ARMING)
             self.set_mode(Mode.LAND, "NAV_LAND")
             return ACCEPTED, ""
         if cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
@@ -438,6 +442,9 @@ class FakePx4:
                 return TEMP_REJECTED, "no position"
             if self.mode is Mode.OFFBOARD and self.now - self.last_sp_time > OFFBOARD_SIGNAL_FRESH_S:
                 return TEMP_REJECTED, "offboard without setpoints"
+            if self.mode in PREVENT_ARMING:
+                self.statustext(mavlink.MAV_SEVERITY_CRITICAL, "Arming denied: Mode not suitable for arming")
+                return DENIED, f"{self.mode.name} not armable"
             self.arm("ARM_DISARM")
             return ACCEPTED, ""
         if not self.armed:
@@ -485,9 +492,8 @@ class FakePx4:
                 return TEMP_REJECTED, "not armed"
             self._start_rtl("DO_SET_MODE")
             return ACCEPTED, ""
-        if mode is Mode.LAND and not self.armed:
-            return TEMP_REJECTED, "not armed"
-        self.user_mode = mode
+        if mode not in PREVENT_ARMING:  # PX4 keeps the last one it arms in, for after the disarm
+            self.user_mode = mode
         self.set_mode(mode, "DO_SET_MODE")
         return ACCEPTED, ""
 

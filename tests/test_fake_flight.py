@@ -131,14 +131,27 @@ def test_discover_health_arm_takeoff_hold_land_disarm(fake_vehicle_factory):
             await asyncio.sleep(2.0)  # hold
             pos = await s.position()
             assert math.dist((pos.north_m, pos.east_m, pos.down_m), (start.north_m, start.east_m, start.down_m)) < 0.1
+            await s.action.hold()  # as the abort ladder's Hold rung asks, before its Land
             await s.action.land()
             await s.wait(s.tel.armed, lambda a: not a, 15.0, "disarm after landing")
             assert (await s.position()).down_m == pytest.approx(0.0, abs=0.01)
+            # PX4 leaves Land for the last mode asked for that it arms in (UserModeIntention::onDisarm) …
+            await s.wait(s.tel.flight_mode, lambda m: m == FlightMode.HOLD, 3.0, "Hold after the disarm")
+            # … takes Land while disarmed, and will not arm there (PX4 SITL after an abort: "armable not ok"
+            # for 30 s, the next flight refused; mode_req_prevent_arming)
+            await s.action.land()
+            await s.wait(s.tel.flight_mode, lambda m: m == FlightMode.LAND, 3.0, "Land, disarmed")
+            await s.wait(s.tel.health, lambda h: not h.is_armable, 3.0, "not armable in Land")
+            with pytest.raises(ActionError):
+                await s.action.arm()
+            await s.action.hold()
+            await s.wait(s.tel.health, lambda h: h.is_armable, 3.0, "armable again in Hold")
 
     asyncio.run(fly())
     df = truth(fake)
     details = " | ".join(df[df.kind == "mode"].detail.astype(str))
-    for expected in ("armed", "HOLD->TAKEOFF", "TAKEOFF->HOLD (takeoff complete)", "HOLD->LAND", "disarmed (landed)"):
+    for expected in ("armed", "HOLD->TAKEOFF", "TAKEOFF->HOLD (takeoff complete)", "HOLD->LAND", "disarmed (landed)",
+                     "LAND->HOLD (landed: back to the mode last asked for)"):  # fmt: skip
         assert expected in details
     assert not (df.kind == "crash").any()
     assert -states(df).d_m.min() == pytest.approx(TAKEOFF_ALT_M, abs=0.25)

@@ -41,6 +41,23 @@ def whys(lad: g.AbortLadder) -> list[str]:
 # -- the decisions, in virtual time ------------------------------------------------------------------
 
 
+def test_a_disarm_not_yet_confirmed_gets_no_land_re_sent():
+    """PX4 leaves Land for Hold as it disarms (UserModeIntention::onDisarm); the evidence of the disarm takes a
+    second (ground.DISARM_HELD_S). A Land re-sent in it left PX4 SITL disarmed in Land, where it will not arm,
+    and the campaign's next flight was refused (bench/RESULTS.md)."""
+    lad = ladder_in_land(land_retry_s=3.0)
+    assert lad.step(ob(10.0, mode="HOLD", armed=False)) is None
+    assert lad.step(ob(10.5, mode="HOLD", armed=False)) is None
+    assert lad.step(ob(11.0, mode="HOLD", armed=False, landed=True)) is None
+    assert lad.done and lad.history[-1][1:] == ("DONE", "landed")
+    # armed in Hold: a Land that did not take, re-sent
+    lad = ladder_in_land(land_retry_s=3.0)
+    assert lad.step(ob(10.0, mode="HOLD")) == g.CMD_LAND
+    # and while the telemetry is stale the disarm cannot be trusted either: Land goes on being sent
+    lad = ladder_in_land(land_retry_s=3.0, land_min_resend_s=0.5)
+    assert lad.step(ob(10.0, mode="HOLD", armed=False, telemetry_fresh=False)) == g.CMD_LAND
+
+
 def test_stale_telemetry_in_land_re_sends_land_and_notes_it_until_landed():
     lad = ladder_in_land(land_retry_s=3.0, land_min_resend_s=0.5)
     assert lad.step(ob(0.2, mode="LAND")) is None

@@ -36,8 +36,9 @@ class AutopilotRules:
     # leaving offboard by "offboard stop" reaches the hold mode (PX4); else the ladder asks for it (ArduPilot,
     # whose MAVSDK "offboard stop" would leave it in a pilot's mode)
     hold_by_offboard_stop: bool
-    # disarmed in one of these the vehicle will not arm (PX4: Offboard without a setpoint stream; ArduCopter:
-    # LAND/RTL/AUTO, which MAVSDK's arm turns into BRAKE, "Mode not armable"): the preflight sets armable_mode
+    # disarmed in one of these the vehicle will not arm (PX4: Offboard without a setpoint stream, and Land, Return,
+    # Follow: "Mode not suitable for arming"; ArduCopter: LAND/RTL/AUTO, which MAVSDK's arm turns into BRAKE,
+    # "Mode not armable"): the preflight sets armable_mode
     not_armable_modes: frozenset[str]
     armable_mode: str
     # it leaves the offboard mode by itself when setpoints stop (PX4's COM_OF_LOSS_T); ArduPilot stays in
@@ -61,7 +62,8 @@ PX4_RULES = AutopilotRules(
     name=PX4, offboard_mode="OFFBOARD", hold_mode="HOLD", land_mode="LAND",
     pilot_modes=frozenset({"MANUAL", "ALTCTL", "POSCTL", "ACRO", "STABILIZED", "RATTITUDE"}),
     failsafe_modes=frozenset({"LAND", "RETURN_TO_LAUNCH"}),
-    hold_by_offboard_stop=True, not_armable_modes=frozenset({"OFFBOARD"}), armable_mode="HOLD",
+    hold_by_offboard_stop=True, not_armable_modes=frozenset({"OFFBOARD", "LAND", "RETURN_TO_LAUNCH", "FOLLOW_ME"}),
+    armable_mode="HOLD",
     offboard_loss_failsafe=True,
     health_wait_s=30.0, reads_mode_from_heartbeat=False,
 )  # fmt: skip

@@ -510,6 +510,7 @@ class LadderObservation:
     telemetry_fresh: bool = True
     mode: str = ""  # the autopilot's mode name (flighttest.flying.autopilot), e.g. "HOLD" / "BRAKE", "LAND"
     landed: bool = False  # disarmed on the ground, on evidence (flighttest.flying.ground)
+    armed: bool = True  # as last reported: a disarm before the evidence confirms it
     on_ground: bool = False  # on the ground, armed or not, on evidence
     link_ok: bool = True
     heard_age_s: float = 0.0  # since anything was last heard from the vehicle (a state sample)
@@ -681,6 +682,10 @@ class AbortLadder:
                 return CMD_LAND
             else:
                 self.note(t, f"{watch} during Land: Land was just sent, re-sending in {tm.land_retry_s:g} s")
+        # reported disarmed, not yet confirmed (ground.DISARM_HELD_S): PX4 leaves Land for Hold as it disarms, and
+        # a Land sent then left PX4 SITL disarmed in Land, where it will not arm (the next flight refused)
+        if not ob.armed and not watch:
+            return None
         # the mode cannot be trusted while the telemetry is stale: keep asking
         if (watch or ob.mode != self.rules.land_mode) and t - self._last_land_t >= tm.land_retry_s:
             self._last_land_t = t

@@ -97,6 +97,7 @@ class LadderExecutor:
                 t_s=now, vd_mps=st.vd_mps, region_ok=d is not None and d.margin_mps >= 0.0,
                 telemetry_fresh=fresh, mode=st.flight_mode,
                 landed=host.disarmed() is not None, on_ground=host.on_ground() is not None, link_ok=st.connected,
+                armed=st.armed,
                 heard_age_s=now - max(heard, t_start),
             )  # fmt: skip
             cmd = self.ladder.step(ob)
