@@ -15,9 +15,9 @@ From a flight's log folder (docs/CONTRACTS.md "Flight log folders"):
   whole time in the air, twice its RMS (the barometer's own noise taken out; :func:`estimate_error`).
   Holding its estimated height, a vehicle whose velocity estimate is off really moves, and the barometer
   sees it; in the descent the two disagree by the estimate's error. One snapshot (the hover before the
-  descent, as first tried) caught 0.13 m/s of an error that reached 0.27 m/s in the descent that followed on the fake's
-  PX4 (bench/RESULTS.md, "The build-up"). A log without a barometer has none: the budget then keeps its
-  default.
+  descent, as first tried) caught 0.13 m/s of an error that reached 0.27 m/s in the descent that followed
+  on the fake's PX4 (bench/RESULTS.md, "The build-up"). A log without a barometer has none: the budget then
+  keeps its default.
 
 Only flighttest folders carry the plan and the guard's log; for anything else this raises.
 """

@@ -14,8 +14,9 @@ vehicle with no history flies today's conservative margins); each next one plans
   the vehicle's flights measured), else ``estimate_default_mps``: the guard judges the estimate, the truth
   may be this far beyond it. Only what the guard's own margin (the profile's ``[vrs] margin_mps``) does not
   already cover: the plan's margin sits on top of it, and the vehicle flies its estimate, so the estimate's
-  error moves the truth, not what the guard sees (PX4 and ArduCopter SITL: the truth within 0.01 m/s of the
-  guard's least margin, bench/RESULTS.md "The build-up's evidence, judged against the simulators' truth");
+  error moves the truth, not what the guard sees (PX4 and ArduCopter SITL: the truth's least margin never more
+  than 0.01 m/s nearer the bound than the guard's, bench/RESULTS.md "The build-up's evidence, judged against the
+  simulators' truth");
 - **reserve**: a constant on top.
 
 The next margin is their sum, never below ``floor_mps`` and never more than ``max_narrow_fraction``
