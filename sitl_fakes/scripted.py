@@ -7,7 +7,8 @@ fraction of a second (px4-ros2-interface-lib's ``fake_autopilot`` and RotorPy's 
 models). It keeps what the runner's decisions depend on, for PX4 (``autopilot=PX4``) or ArduCopter
 (``autopilot=ARDUPILOT``), each with its own mode names and parameters (``flighttest.flying.autopilot``):
 
-- the modes and their transitions: PX4's takeoff ends in HOLD and ``offboard stop`` goes to HOLD;
+- the modes and their transitions: PX4's takeoff ends in HOLD and ``offboard stop`` goes to HOLD, and as it
+  disarms after a landing PX4 goes back to the last mode asked for that it arms in (it will not arm in Land);
   ArduCopter takes off in GUIDED and stays there, and its hold is BRAKE; Land descends at
   ``land_speed_mps`` (ArduCopter's LAND_SPD_MS) and disarms on the ground; a pilot mode holds where the
   pilot is;
@@ -58,6 +59,9 @@ ARDUPILOT_PARAMS: dict[str, float | int] = {
 
 
 HISTORY_S = 5.0  # how far back a delayed stream may reach (``delay_telemetry``)
+# the modes PX4 will not arm in (ModeUtil/mode_requirements.cpp, mode_req_prevent_arming: "Mode not suitable for
+# arming"); it leaves Land for the last mode asked for outside them as it disarms after a landing
+PX4_PREVENT_ARMING = frozenset({"LAND", "RETURN_TO_LAUNCH", "FOLLOW_ME"})
 
 
 @dataclass
@@ -143,6 +147,7 @@ class ScriptedAutopilot:
         self.v_ned = np.zeros(3)
         self.a_ned = np.zeros(3)
         self.mode = "STABILIZE" if ardupilot else self.rules.hold_mode  # what each is in on the ground
+        self._after_disarm = self.mode  # PX4: the last mode asked for that it arms in (UserModeIntention::onDisarm)
         self.armed = False
         self.hold_ned = np.zeros(3)
         self.takeoff_alt_m = 2.5
@@ -321,6 +326,8 @@ class ScriptedAutopilot:
                 # MAVSDK's arm switches LAND/RTL/AUTO to BRAKE first, where ArduCopter will not arm
                 self.mode = "BRAKE"
                 raise RuntimeError(f"{what}: denied (Arm: Mode not armable)")
+            if self.rules.name != ARDUPILOT and self.mode in PX4_PREVENT_ARMING:
+                raise RuntimeError(f"{what}: denied (Mode not suitable for arming)")
             self.armed = True
             self.took_off = False
             self._armed_t = self.now()
@@ -366,6 +373,7 @@ class ScriptedAutopilot:
             if self.setpoint is None:  # PX4 refuses offboard without a setpoint stream
                 raise RuntimeError(f"{what}: no setpoint")
             self.mode = self.rules.offboard_mode
+            self._asked(self.mode)
             self.taking_off = False
 
         await self._command("start_offboard", what, timeout_s, effect)
@@ -377,6 +385,7 @@ class ScriptedAutopilot:
         def effect() -> None:
             self.hold_ned = self.p_ned.copy()
             self.mode = name
+            self._asked(name)
             self.taking_off = False
 
         await self._command("set_mode", f"mode {name}", timeout_s, effect)
@@ -384,7 +393,12 @@ class ScriptedAutopilot:
     def _enter_hold(self) -> None:
         self.hold_ned = self.p_ned.copy()
         self.mode = self.rules.hold_mode
+        self._asked(self.mode)
         self.taking_off = False
+
+    def _asked(self, mode: str) -> None:
+        if mode not in PX4_PREVENT_ARMING:
+            self._after_disarm = mode
 
     # -- the vehicle ---------------------------------------------------------------------------------
     async def _run(self) -> None:
@@ -460,6 +474,8 @@ class ScriptedAutopilot:
                 landed_s = now - self._ground_since
                 if self.mode == self.rules.land_mode and after_flight and landed_s >= self.disarm_after_s:
                     self.armed = False
+                    if self.rules.name != ARDUPILOT:  # PX4 leaves Land for it as it disarms, in the same heartbeat
+                        self.mode = self._after_disarm
             if not self.took_off and now - self._armed_t >= self.preflight_disarm_s and not self.taking_off:
                 self.armed = False  # armed this long without a takeoff
         else:
