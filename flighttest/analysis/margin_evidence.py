@@ -110,13 +110,13 @@ def acting_over(guard: pd.DataFrame, t0_s: float, t1_s: float, clear_violation_m
     return float(m.min()) if m.size else None
 
 
-def _clear_violation(folder: Path) -> float:
-    """The guard's clear-violation band the flight flew with (``meta.json``), else the default."""
+def _clear_violation(meta: dict[str, Any]) -> float:
+    """The guard's clear-violation band the flight flew with (the log's ``meta.json``), else the default."""
     from flighttest.flying.missions_config import GuardConfig
 
     try:
-        v = json.loads((folder / "meta.json").read_text(encoding="utf-8"))["config"]["guard"]["clear_violation_mps"]
-    except (OSError, ValueError, KeyError, TypeError):
+        v = meta["config"]["guard"]["clear_violation_mps"]
+    except (KeyError, TypeError):
         v = None
     ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
     return float(v) if ok else GuardConfig().clear_violation_mps
@@ -232,8 +232,8 @@ def flight_evidence(log_dir: Path | str) -> MarginEvidence:
                               estimate_source="no descent was flown")  # fmt: skip
     t1 = t1 if t1 is not None else float(guard["t_s"].max())
     least, flags = guard_over(guard, t0, t1)
-    acting = acting_over(guard, t0, t1, _clear_violation(folder))
     log = load_log(folder)
+    acting = acting_over(guard, t0, t1, _clear_violation(log.meta))
     tracking = _tracking(log)
     estimate, source = None, "no barometer in the log"
     st = log.state
