@@ -87,6 +87,15 @@ def wind_share_ned(traj: Trajectory, wind_ned) -> tuple[float, float, float]:
     return (0.0, 0.0, 0.0) if reach <= STATIONARY_M else tuple(float(x) for x in wind_ned)
 
 
+def hold_accel_ned(traj: Trajectory, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)) -> tuple[float, float, float]:
+    """The acceleration a hold at the end of ``traj`` is sent with: the drag of the wind the stream's feed-forward
+    carried (``wind_share_ned``), at rest. The autopilot's velocity integrator does not hold that drag after a
+    stream that sent it, so a hold without it drifts downwind: on PX4 SITL in 3 m/s (SIH) 1.7 m, and it took
+    7 s to come back within 0.5 m (bench/RESULTS.md, "The hold after a helix in wind")."""
+    acc = feedforward_accel_ned(np.zeros(1), np.zeros((1, 3)), np.zeros((1, 3)), ff, wind_share_ned(traj, wind_ned))
+    return float(acc[0, 0]), float(acc[0, 1]), 0.0
+
+
 def for_autopilot(traj: Trajectory, ff: Feedforward, wind_ned=(0.0, 0.0, 0.0)) -> Trajectory:
     """``traj`` with its acceleration columns replaced by what the autopilot should be sent, in the wind
     ``wind_ned`` (its drag's share: ``wind_share_ned``)."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import math
 import signal
 import sys
@@ -30,7 +31,13 @@ from flighttest.analysis import descent_time as dtime
 from flighttest.errors import FlighttestError
 from flighttest.flying import guard as gd
 from flighttest.flying.autopilot import ARDUPILOT, PX4_RULES, AutopilotRules
-from flighttest.flying.feedforward import CatchUpLimit, Feedforward, for_autopilot, z_position_gain_per_s
+from flighttest.flying.feedforward import (
+    CatchUpLimit,
+    Feedforward,
+    for_autopilot,
+    hold_accel_ned,
+    z_position_gain_per_s,
+)
 from flighttest.flying.ground import GroundEvidence
 from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, LadderExecutor
 from flighttest.flying.link import GCS_SYSID, Link, VehicleLink
@@ -166,6 +173,7 @@ class MissionRunner:
         check_duration(req.trajectory)
         self.traj = req.trajectory.resample(self.fl.rate_hz)
         self.stream_traj = self.traj  # what is sent: the plan with the autopilot's feed-forward (preflight)
+        self.stream_wind_ned: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the wind its feed-forward carries
         self.origin: tuple[float, float, float] | None = None
         self.end_point: tuple[float, float, float] | None = None
         self.t_stream_start: float | None = None
@@ -624,7 +632,8 @@ class MissionRunner:
         except OSError as exc:
             self.event("warning", what=f"params.json not written ({exc})")
         self.ff = self._feedforward(all_params, await link.autopilot_name())
-        self.stream_traj = for_autopilot(self.traj, self.ff, self.watch.wind_ned_mps())
+        self.stream_wind_ned = self.watch.wind_ned_mps()
+        self.stream_traj = for_autopilot(self.traj, self.ff, self.stream_wind_ned)
         accel = max(0.5 * req.profile.max_accel_up_mps2, 0.5)
         stats = trajectory_stats(self.traj, self.limits.region, accel, self.ff.drag_per_s, self.watch.wind_ned_mps())
         ab = self.cfg.abort
@@ -791,6 +800,8 @@ class MissionRunner:
         if self.ladder.active:
             return None
         end_sp = self.streamer.last_planned.hold() if self.streamer.last_planned else hold
+        an, ae, _ = hold_accel_ned(self.traj, self.ff, self.stream_wind_ned)
+        end_sp = dataclasses.replace(end_sp, an_mps2=an, ae_mps2=ae)
         self.set_phase(Phase.SETTLE)
         # hover on until the descent counts as reached, vertically and hover to hover (their rules are stricter
         # than settling: an overshoot of the end height settles before it is back within 0.2 m), or time out
@@ -860,6 +871,7 @@ class MissionRunner:
             self.traj = chosen.resample(self.fl.rate_hz)
             self.log.save_trajectory(chosen)
         self.stream_traj = for_autopilot(self.traj, self.ff, wind.ned_mps)
+        self.stream_wind_ned = wind.ned_mps
         return True
 
     async def _ground_command(self, command: Awaitable[Any], timeout_s: float) -> None:
@@ -904,8 +916,12 @@ class MissionRunner:
                     self.event("settle_timeout", at_ned=[sp.n_m, sp.e_m, sp.d_m], after_s=max_s)
                     return True
                 raise RuntimeError(f"did not settle at ({sp.n_m:.1f}, {sp.e_m:.1f}, {sp.d_m:.1f}) within {max_s:g} s")
-            return (settled_since is not None and now - settled_since >= min(min_s, 1.0) and now - t0 >= min_s
-                    and (also is None or also()))
+            return (
+                settled_since is not None
+                and now - settled_since >= min(min_s, 1.0)
+                and now - t0 >= min_s
+                and (also is None or also())
+            )
 
         await self.streamer.stream(lambda k: sp, self.phase, done)
 
