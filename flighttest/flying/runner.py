@@ -916,12 +916,8 @@ class MissionRunner:
                     self.event("settle_timeout", at_ned=[sp.n_m, sp.e_m, sp.d_m], after_s=max_s)
                     return True
                 raise RuntimeError(f"did not settle at ({sp.n_m:.1f}, {sp.e_m:.1f}, {sp.d_m:.1f}) within {max_s:g} s")
-            return (
-                settled_since is not None
-                and now - settled_since >= min(min_s, 1.0)
-                and now - t0 >= min_s
-                and (also is None or also())
-            )
+            return (settled_since is not None and now - settled_since >= min(min_s, 1.0) and now - t0 >= min_s
+                    and (also is None or also()))
 
         await self.streamer.stream(lambda k: sp, self.phase, done)
 
