@@ -109,7 +109,7 @@ def test_in_3_mps_of_wind_the_descent_is_flown_and_the_air_never_entered_the_reg
         ev = events(s["log_dir"])
         end = next(e["unix_s"] for e in ev if e["event"] == "stream_end")
         landing = next((e["unix_s"] for e in ev if e["event"] == "phase" and e["unix_s"] > end
-                        and e["phase"] not in ("settle", "stream_hold")), math.inf)  # fmt: skip
+                        and e["phase"] != "settle"), math.inf)  # fmt: skip
         held = st[(st["unix_s"] >= end) & (st["unix_s"] < landing)]
         downwind = np.asarray(wind[:2]) / math.hypot(*wind[:2])
         moved = (held[["n_m", "e_m"]].to_numpy(float) - held[["n_m", "e_m"]].to_numpy(float)[0]) @ downwind

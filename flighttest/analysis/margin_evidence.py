@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from flighttest.errors import FlighttestError
+from flighttest.flying.missions_config import GuardConfig
 
 WINDOW_S = 2.0  # the estimate judged against the barometer over windows this long (ArduCopter's 2 Hz of it too)
 MIN_BARO_SAMPLES = 4  # per window
@@ -112,8 +113,6 @@ def acting_over(guard: pd.DataFrame, t0_s: float, t1_s: float, clear_violation_m
 
 def _clear_violation(meta: dict[str, Any]) -> float:
     """The guard's clear-violation band the flight flew with (the log's ``meta.json``), else the default."""
-    from flighttest.flying.missions_config import GuardConfig
-
     try:
         v = meta["config"]["guard"]["clear_violation_mps"]
     except (KeyError, TypeError):
