@@ -232,6 +232,23 @@ def _downwind(speed_mps: float, sink_mps: float, duration_s: float) -> Trajector
                                   ae_mps2=speed_mps * a, ad_mps2=sink_mps * a, yaw_deg=zero)  # fmt: skip
 
 
+def test_gusts_whose_updrafts_leave_no_clear_plan_stop_the_descent_before_it_starts(tmp_path):
+    # in 3 m/s of wind, the operator's gusts of 0.4 m/s (1 σ): an updraft of 0.78 m/s allowed, more than the
+    # vertical's room to the region where it slows at the bottom. The start hover refuses, says why, and lands
+    def gusty(sd_mps):
+        return lambda ap, runner: setattr(runner.wind, "stated_gust_sd_mps", sd_mps)
+
+    windy = {"request": {"wind_ned_mps": (0.0, 3.0, 0.0), "wind_sd_mps": 0.1}, "wind_ned_mps": (0.0, 3.0, 0.0)}
+    f = fly(tmp_path, gusty(0.4), **windy)
+    assert f.outcome.outcome == "aborted" and f.summary["abort_verdict"] == "wind"
+    assert f.outcome.abort_reason.startswith("no plan clears the guard region in the wind at the start, ")
+    assert "updrafts to 0.78 m/s allowed for its gusts" in f.outcome.abort_reason
+    assert "stream" not in [e["phase"] for e in f.events if e["event"] == "phase"]
+    assert f.ladder()[-1] == ("DONE", "landed") and not f.ap.armed
+    calm = fly(tmp_path / "calm", gusty(0.05), **windy)
+    assert calm.outcome.outcome == "completed"  # 0.1 m/s of updraft: the vertical clears it
+
+
 def test_a_zero_wind_report_does_not_replace_the_operators_tailwind(tmp_path):
     # downwind at 3 m/s in a 3 m/s tailwind, sinking 0.9 m/s: no air across the disk, straight down through
     # it. An autopilot that does not estimate the wind reports (0, 0, 0)

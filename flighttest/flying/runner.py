@@ -855,7 +855,8 @@ class MissionRunner:
         self.event("wind_plan", **wind.describe(), candidates=[x for *_, x in judged])
         if not clear:
             best = max(judged, key=lambda j: j[1])
-            self.abort(f"no plan clears the guard region in the wind at the start, {said} (best margin "
+            gusts = f", updrafts to {wind.updraft_mps:.2f} m/s allowed for its gusts" if wind.updraft_mps else ""
+            self.abort(f"no plan clears the guard region in the wind at the start, {said}{gusts} (best margin "
                        f"{best[1]:.2f} m/s)", gd.Rung.HOLD, "wind")  # fmt: skip
             return False
         # the fastest that keeps, in this air, the tracking margin it was planned with (a plan for another wind
