@@ -42,7 +42,7 @@ def fly(fake, vehicle: str, mission: str, tmp_path: Path) -> dict:
 # (vehicle, the fake's options, mission, wind NED, the gusts' sd along and across the wind; half of it vertically).
 # arducopter_sitl's helix in 0.3 m/s of gusts: in 0.6 an updraft of 0.54 m/s once put the truth 0.24 m/s into the
 # region 0.1 s before the guard acted, for the guard's allowance sees only the slow part of the gusts
-# (bench/RESULTS.md, "Updrafts in the guard" and "Updrafts from the gusts' model, tried")
+# (bench/RESULTS.md, "Updrafts in the guard" and "Updrafts from the gusts' model, tried and reverted")
 CASES = [
     ("x500", {}, "helix", (0.0, 3.0, 0.0), 0.0),
     ("x500", {}, "vertical", (-2.1, 2.1, 0.0), 0.6),
