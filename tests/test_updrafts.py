@@ -4,14 +4,18 @@ guard's verdict and the analysis's worst-air margin."""
 
 from __future__ import annotations
 
+import json
 import math
 import random
+import subprocess
+import sys
 from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
 import pytest
 
+import flighttest
 from flighttest.analysis.exposure import velocity_track
 from flighttest.analysis.wind import LogWind
 from flighttest.errors import FlighttestError
@@ -129,3 +133,24 @@ def test_the_operators_gusts_are_a_checked_config_value(tmp_path):
         load_mission_config(src)
     src.write_text('mission = "vertical"\n[guard]\ngust_sd_mps = 0.3\n', encoding="utf-8")
     assert load_mission_config(src).guard.gust_sd_mps == 0.3
+
+
+def test_gusts_whose_updraft_puts_a_hover_in_the_region_are_refused_before_anything_connects(tmp_path):
+    # x500: w_allow 0.85 − margin 0.10; 0.4 m/s of gusts allow an updraft of 0.78 m/s, which the guard held
+    # against the vehicle on the ground and aborted at arming ("marginal ... w=0.00")
+    x500 = load_profile("x500")
+    limit = (x500.w_allow_mps - x500.vrs.margin_mps) / UPDRAFT_SIGMAS
+    src = tmp_path / "m.toml"
+    logs = tmp_path / "logs"
+    args = {"connect": "udpin://0.0.0.0:14540", "vehicle": "x500", "config": src, "log_dir": logs}
+    src.write_text(f'mission = "vertical"\n[guard]\ngust_sd_mps = {limit - 0.01:.2f}\n', encoding="utf-8")
+    assert flighttest.prepare_flight("vertical", **args).config.guard.gust_sd_mps == round(limit - 0.01, 2)
+    src.write_text(f'mission = "vertical"\n[guard]\ngust_sd_mps = {limit + 0.01:.2f}\n', encoding="utf-8")
+    with pytest.raises(FlighttestError, match=r"gust_sd_mps .* put even a hover .* inside x500's guard region"):
+        flighttest.prepare_flight("vertical", **args)
+    p = subprocess.run([sys.executable, "-m", "flighttest", "fly", "vertical", "--connect", "udpin://0.0.0.0:14540",
+                        "--vehicle", "x500", "--config", str(src), "--log-dir", str(logs), "--json"],
+                       capture_output=True, text=True)  # fmt: skip
+    out = json.loads(p.stdout)
+    assert p.returncode == 2 and out["outcome"] == "refused" and "gust_sd_mps" in out["error"]
+    assert "Traceback" not in p.stderr and not logs.exists()

@@ -19,13 +19,16 @@ import dataclasses
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from flighttest.errors import FlighttestError
 from flighttest.flying.mission_scripts import MISSIONS, load_mission_module
 from flighttest.flying.missions_config import DESCENT_KEYS, MissionConfig, load_mission_config
 from flighttest.flying.outcome import FlightOutcome, FlyRequest
 from flighttest.flying.preflight import PreflightResult
+
+if TYPE_CHECKING:
+    from flighttest.model.profiles import VehicleProfile
 
 # each keyword's name in messages: the library's own; the command line passes its options' names instead
 KEYWORD_NAMES = {"height_m": "height_m", "descent_m": "descent_m", "min_alt_m": "min_alt_m",
@@ -68,7 +71,7 @@ def prepare_flight(
     from flighttest.console import console
     from flighttest.flying.link import check_connection, check_url
     from flighttest.flying.runner import check_duration
-    from flighttest.model.profiles import VehicleProfile, load_profile
+    from flighttest.model.profiles import load_profile
     from flighttest.model.trajectory import Trajectory
     from flighttest.planner.optimum import with_optimum
 
@@ -112,6 +115,7 @@ def prepare_flight(
         cfg = dataclasses.replace(cfg, plan={**cfg.plan, "max_descent_mps": max_descent_mps})
     cfg = with_descent(cfg, descent_m, target, names["descent_m"])
     check_room(cfg, names)
+    check_gusts(cfg, profile)
     if module is not None:
         try:
             traj = module.plan(profile, cfg)
@@ -227,6 +231,27 @@ def with_descent(cfg: MissionConfig, descent_m: float | None, target: str, name:
         raise FlighttestError(f"{name} does not apply: {cfg.path or 'the config'} flies the planned file "
                               f"{cfg.plan['trajectory']!r}, whose descent is in the file")  # fmt: skip
     return dataclasses.replace(cfg, plan={**cfg.plan, DESCENT_KEYS[cfg.mission]: float(descent_m)})
+
+
+def check_gusts(cfg: MissionConfig, profile: VehicleProfile) -> None:
+    """The operator's gusts (``[guard] gust_sd_mps``) leave the hover outside the guard's region: the guard
+    allows their updraft for the whole flight, so one that alone puts a hover in the region aborts every
+    flight the moment it arms (one line, before anything connects)."""
+    from flighttest.flying.wind import UPDRAFT_SIGMAS
+
+    sd = cfg.guard.gust_sd_mps
+    updraft = UPDRAFT_SIGMAS * sd
+    region = profile.guard_region()
+    margin = float(region.margin(updraft, 0.0))
+    if margin < 0.0:
+        at_most = max(0.0, (region.w_allow_mps - region.margin_mps) / UPDRAFT_SIGMAS)
+        where = cfg.path or "the config"
+        raise FlighttestError(
+            f"[guard] gust_sd_mps {sd:g} m/s in {where}: the guard allows updrafts to {updraft:.2f} m/s for such "
+            f"gusts, which put even a hover {-margin:.2f} m/s inside {profile.name}'s guard region (w_allow "
+            f"{region.w_allow_mps:.2f} − margin {region.margin_mps:.2f} m/s): no descent can be flown in them "
+            f"(at most {at_most:.2f} m/s, 1 σ, leaves its hover clear)"
+        )
 
 
 def check_room(cfg: MissionConfig, names: Mapping[str, str] = KEYWORD_NAMES) -> None:
