@@ -373,3 +373,26 @@ def test_px4s_speed_limits_change_no_flown_plan_and_guided_limits_replace_px4s()
     # an x500 profile on ArduPilot firmware: GUIDED's limits, not PX4's table with them mixed in
     on_ap, _ = with_live_limits(x500, ardupilot_limits(ARDUCOPTER))
     assert on_ap.autopilot == ac.autopilot
+
+
+def test_a_lower_tilt_limit_of_the_vehicle_replaces_the_profiles_and_plans_again_on_either_autopilot():
+    # issue 22: ANGLE_MAX and MPC_TILTMAX_AIR are limits the position control imposes, as WP_ACC_Z is
+    from flighttest.flying.live_limits import ardupilot_limits, plans_bound, px4_limits, with_live_limits
+
+    ac = load_profile("arducopter_sitl")  # 30°, ATC_ANGLE_MAX's default
+    assert with_live_limits(ac, ardupilot_limits({**ARDUCOPTER, "ATC_ANGLE_MAX": 30.0, "PSC_ANGLE_MAX": 0.0})) == (
+        ac, [])  # fmt: skip
+    lower, diffs = with_live_limits(ac, ardupilot_limits({**ARDUCOPTER, "ATC_ANGLE_MAX": 20.0}))
+    assert lower.max_tilt_deg == 20.0 and diffs == ["ATC_ANGLE_MAX 20 (the profile's 30)"]
+    assert lower.autopilot == ac.autopilot and plans_bound(ac, lower)
+    # a higher one is not the airframe's: the profile's stands (its SITL's helix at 25° was stopped at the flare)
+    assert with_live_limits(ac, ardupilot_limits({**ARDUCOPTER, "ATC_ANGLE_MAX": 40.0})) == (ac, [])
+    # PSC_ANGLE_MAX, where set, is the position controller's own; older firmware: ANGLE_MAX in cdeg
+    assert ardupilot_limits({"PSC_ANGLE_MAX": 25.0, "ATC_ANGLE_MAX": 40.0})["max_tilt_deg"].value == 25.0
+    old = ardupilot_limits({"ANGLE_MAX": 4500})["max_tilt_deg"]
+    assert old.value == 45.0 and old.describe() == "ANGLE_MAX 4500 (45 °)"
+    # PX4 clips offboard tilt to MPC_TILTMAX_AIR: unlike its speeds, a change plans again
+    x500 = load_profile("x500")
+    lower, diffs = with_live_limits(x500, px4_limits({"MPC_TILTMAX_AIR": 35.0, "MPC_Z_VEL_MAX_DN": 1.5}), "PX4")
+    assert lower.max_tilt_deg == 35.0 and diffs == ["MPC_TILTMAX_AIR 35 (the profile's 45)"]
+    assert plans_bound(x500, lower)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -13,6 +14,7 @@ from flighttest.model.profiles import load_profile
 from flighttest.model.trajectory import FORMAT, Trajectory
 from flighttest.planner.export import vertical_trajectory
 from flighttest.planner.vertical import plan_vertical
+from virtual_flight import leaning_descent
 
 X500 = load_profile("x500")
 REGION = X500.guard_region()
@@ -241,3 +243,17 @@ def test_the_plan_is_judged_with_the_disk_the_drag_tilts():
     w = float(va @ z)
     assert windy.guard_margin_min_mps == pytest.approx(float(REGION.margin(w, math.sqrt(float(va @ va) - w * w))),
                                                        abs=1e-6)  # fmt: skip
+
+
+def test_the_plans_tilt_is_judged_against_the_vehicles_limit():
+    # issue 22: ATC_ANGLE_MAX / MPC_TILTMAX_AIR clip the tilt; a plan that leans further is flown late. A level
+    # descent, then one that accelerates at 3 m/s² horizontally (17° of tilt)
+    level = pf.trajectory_stats(_vertical(3.0), REGION, 3.0)
+    assert level.tilt_max_deg == pytest.approx(0.0, abs=1e-9)
+    lean = leaning_descent()
+    st = pf.trajectory_stats(lean, REGION, 3.0)
+    assert st.tilt_max_deg == pytest.approx(math.degrees(math.atan2(3.0, 9.80665 - 0.5)), abs=0.01)
+    assert _by_name(pf.trajectory_checks(st, X500, 5.0, 1.0, 10.0))["tilt"].status == pf.PASS
+    low = dataclasses.replace(X500, max_tilt_deg=15.0)
+    c = _by_name(pf.trajectory_checks(st, low, 5.0, 1.0, 10.0))["tilt"]
+    assert c.status == pf.FAIL and c.value == "max 17.9°" and "≤ 15°" in c.requirement

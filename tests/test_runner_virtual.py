@@ -25,7 +25,7 @@ from sitl_fakes.scripted import ARDUPILOT_PARAMS as AP_DEFAULTS
 from sitl_fakes.scripted import PX4_PARAMS as PX4_DEFAULTS
 from sitl_fakes.scripted import ScriptedAutopilot
 from sitl_fakes.virtual_time import run_virtual
-from virtual_flight import DESCENT_M, START_M, X500, Flight, config, fly, in_phase
+from virtual_flight import DESCENT_M, START_M, X500, Flight, config, fly, in_phase, leaning_descent
 
 # -- the nominal flight --------------------------------------------------------------------------------
 
@@ -442,3 +442,22 @@ def test_a_run_refused_for_want_of_a_terminal_leaves_no_flight_folder(tmp_path):
     assert f.outcome.outcome == "refused" and f.outcome.abort_reason.startswith("no terminal to confirm arming")
     assert f.outcome.log_dir is None and list(tmp_path.iterdir()) == []
     assert f.summary["preflight"]["ok"] is True and "arm" not in [c for _, c in f.ap.commands]
+
+
+def test_a_trajectory_is_judged_against_the_tilt_the_vehicle_allows(tmp_path):
+    # issue 22: MPC_TILTMAX_AIR (ATC_ANGLE_MAX on ArduCopter) read at the preflight; a file is flown as it is, so
+    # one leaning 17.9° is refused before arming on a vehicle that allows 15, where the level vertical flies
+    lean = leaning_descent()
+    for d in ("low", "ok"):
+        (tmp_path / d).mkdir()
+    low = fly(tmp_path / "low", traj=lean, params={**PX4_DEFAULTS, "MPC_TILTMAX_AIR": 15.0})
+    checks = {c["name"]: c for c in low.summary["preflight"]["checks"]}
+    assert low.outcome.outcome == "refused" and low.outcome.exit_code == 2
+    assert "arm" not in [c for _, c in low.ap.commands]
+    assert checks["tilt"]["status"] == "fail" and checks["tilt"]["value"] == "max 17.9°"
+    assert "≤ 15°" in checks["tilt"]["requirement"]
+    ok = fly(tmp_path / "ok", params={**PX4_DEFAULTS, "MPC_TILTMAX_AIR": 15.0})  # the level vertical
+    assert ok.outcome.outcome == "completed", ok.outcome.abort_reason
+    live = next(e for e in ok.events if e["event"] == "live_limits")
+    assert live["changed"] == ["MPC_TILTMAX_AIR 15 (the profile's 45)"] and live["replanned"] is False
+    assert {c["name"]: c for c in ok.summary["preflight"]["checks"]}["tilt"]["status"] == "pass"

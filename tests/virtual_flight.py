@@ -10,6 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from flighttest.flying.mission_scripts import load_mission_module, mission_config_path
 from flighttest.flying.missions_config import mission_config_from_dict
 from flighttest.flying.runner import FlightOutcome, FlyRequest, MissionRunner
@@ -86,3 +88,12 @@ def in_phase(runner: MissionRunner, phase: str) -> Callable[[], bool]:
     return lambda: runner.phase == phase and not runner.ladder.active
 
 
+def leaning_descent() -> Trajectory:
+    """A descent of 1 m in 2 s under a steady 3 m/s² north: it leans atan(3 / (g − 0.5)) = 17.9° throughout."""
+    t = np.arange(0.0, 2.0 + 1e-9, 0.02)
+    z = np.zeros_like(t)
+    return Trajectory.from_arrays(
+        {"kind": "vertical", "vehicle": "x500", "problem": {"height_m": 1.0}, "status": "closed_form"},
+        t_s=t, n_m=1.5 * t**2, e_m=z, d_m=0.25 * t**2, vn_mps=3.0 * t, ve_mps=z, vd_mps=0.5 * t,
+        an_mps2=z + 3.0, ae_mps2=z, ad_mps2=z + 0.5, yaw_deg=z,
+    )  # fmt: skip

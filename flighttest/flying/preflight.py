@@ -17,9 +17,10 @@ from flighttest.flying.guard import predicted_blade_velocity_mps
 from flighttest.flying.link import TelemetryState
 from flighttest.flying.live_limits import param_value
 from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M
-from flighttest.model.frames import GuardRegion
+from flighttest.model.aero import G_MPS2
+from flighttest.model.frames import GuardRegion, quat_to_rotmat
 from flighttest.model.profiles import VehicleProfile
-from flighttest.model.trajectory import LIMIT_REL_TOL, Trajectory
+from flighttest.model.trajectory import LIMIT_REL_TOL, TILT_TOL_DEG, Trajectory
 from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION
 
 PASS, WARN, FAIL = "pass", "warn", "fail"
@@ -94,6 +95,7 @@ class TrajectoryStats:
     climb_max_mps: float = 0.0  # largest -vd
     accel_z_max_mps2: float = 0.0  # largest |ad|
     accel_h_max_mps2: float = 0.0  # largest |(an, ae)|
+    tilt_max_deg: float = 0.0  # the plan's own attitude, else where its specific force points
 
 
 def trajectory_stats(
@@ -118,6 +120,10 @@ def trajectory_stats(
     an, ae, ad = (df[c].to_numpy(float) for c in ("an_mps2", "ae_mps2", "ad_mps2"))
     # stopping a sink vd at arrest_accel costs vd²/2a of height below where it starts
     stop = np.where(vd > 0, vd * vd / (2.0 * arrest_accel_mps2), 0.0)
+    if traj.has_attitude():
+        tilt = np.degrees(np.arccos(np.clip(quat_to_rotmat(traj.attitude_quat())[:, 2, 2], -1.0, 1.0)))
+    else:
+        tilt = np.degrees(np.arctan2(np.hypot(an, ae), G_MPS2 - ad))
     if traj.has_attitude() and drag_per_s <= 0:
         q = traj.attitude_quat()
         _, _, _, margin = region.check(vn, ve, vd, q[:, 0], q[:, 1], q[:, 2], q[:, 3])
@@ -146,6 +152,7 @@ def trajectory_stats(
         climb_max_mps=float(max(0.0, -vd.min())),
         accel_z_max_mps2=float(np.abs(ad).max()),
         accel_h_max_mps2=float(np.hypot(an, ae).max()),
+        tilt_max_deg=float(tilt.max()),
     )
 
 
@@ -193,6 +200,13 @@ def trajectory_checks(
         "height to arrest the sink", PASS if _finite(arrest_low) and arrest_low >= min_alt_m - 1e-6 else FAIL,
         f"an abort anywhere bottoms out at {arrest_low:.2f} m",
         f"≥ --min-alt {min_alt_m:g} m",
+    ))  # fmt: skip
+    # the vehicle's tilt limit: its ATC_ANGLE_MAX or MPC_TILTMAX_AIR where the preflight read it
+    # (flighttest.flying.live_limits), which its position control clips to
+    tilt_ok = _finite(stats.tilt_max_deg) and stats.tilt_max_deg <= profile.max_tilt_deg + TILT_TOL_DEG
+    checks.append(Check(
+        "tilt", PASS if tilt_ok else FAIL, f"max {stats.tilt_max_deg:.1f}°",
+        f"≤ {profile.max_tilt_deg:g}°, the vehicle's limit: a plan beyond it is flown clipped",
     ))  # fmt: skip
     room = stats.radius_max_m + recovery_room_m
     checks.append(Check(

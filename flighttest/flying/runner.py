@@ -43,6 +43,7 @@ from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, 
 from flighttest.flying.link import GCS_SYSID, Link, VehicleLink
 from flighttest.flying.live_limits import (
     ARDUPILOT_LIMITS,
+    ARDUPILOT_TILT,
     LiveLimit,
     ardupilot_limits,
     plans_bound,
@@ -619,8 +620,8 @@ class MissionRunner:
         for name, kind in wanted.items():
             params[name] = all_params.get(name) if all_params else await link.get_param(name, kind)
         if rules.name == ARDUPILOT and all_params:  # older firmware's names of the GUIDED limits too
-            params.update({n: all_params[n] for names in ARDUPILOT_LIMITS.values() for n, _ in names
-                           if n in all_params})  # fmt: skip
+            params.update({n: all_params[n] for names in (*ARDUPILOT_LIMITS.values(), ARDUPILOT_TILT)
+                           for n, _ in names if n in all_params})  # fmt: skip
             await self._plan_within(ardupilot_limits(params), ARDUPILOT)
         elif rules.name != ARDUPILOT:
             await self._plan_within(px4_limits(all_params or params), rules.name)
@@ -663,11 +664,15 @@ class MissionRunner:
         """Plan the mission again within the vehicle's own limits (ArduCopter's GUIDED shaping, PX4's vertical
         speeds) where they differ from the profile's (``flighttest.flying.live_limits``): a limit raised for the
         test day lets the plan go faster, one lowered keeps it flyable. Where only PX4's differ, the plans stand
-        and their optimum is made again for the vehicle as it is. A trajectory file is flown as it is (the
-        preflight judges it)."""
+        and their optimum is made again for the vehicle as it is. A trajectory file is flown as it is, and the
+        preflight judges it against the vehicle's own limits."""
         req = self.req
         profile, diffs = with_live_limits(req.profile, live, autopilot)
-        if not diffs or req.replan is None:
+        if not diffs:
+            return
+        if req.replan is None:
+            self.event("live_limits", changed=diffs, replanned=False)
+            req.profile = profile
             return
         if not plans_bound(req.profile, profile):
             # the yardstick is the vehicle's: an optimum faster than its autopilot lets it fly is not one
