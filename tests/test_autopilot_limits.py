@@ -387,8 +387,10 @@ def test_a_lower_tilt_limit_of_the_vehicle_replaces_the_profiles_and_plans_again
     assert lower.autopilot == ac.autopilot and plans_bound(ac, lower)
     # a higher one is not the airframe's: the profile's stands (its SITL's helix at 25° was stopped at the flare)
     assert with_live_limits(ac, ardupilot_limits({**ARDUCOPTER, "ATC_ANGLE_MAX": 40.0})) == (ac, [])
-    # PSC_ANGLE_MAX, where set, is the position controller's own; older firmware: ANGLE_MAX in cdeg
-    assert ardupilot_limits({"PSC_ANGLE_MAX": 25.0, "ATC_ANGLE_MAX": 40.0})["max_tilt_deg"].value == 25.0
+    # PSC_ANGLE_MAX, where set, is the position controller's own, within the attitude controller's; older
+    # firmware: ANGLE_MAX in cdeg
+    assert ardupilot_limits({"PSC_ANGLE_MAX": 25.0, "ATC_ANGLE_MAX": 40.0})["max_tilt_deg"].param == "PSC_ANGLE_MAX"
+    assert ardupilot_limits({"PSC_ANGLE_MAX": 45.0, "ATC_ANGLE_MAX": 40.0})["max_tilt_deg"].value == 40.0
     old = ardupilot_limits({"ANGLE_MAX": 4500})["max_tilt_deg"]
     assert old.value == 45.0 and old.describe() == "ANGLE_MAX 4500 (45 °)"
     # PX4 clips offboard tilt to MPC_TILTMAX_AIR: unlike its speeds, a change plans again

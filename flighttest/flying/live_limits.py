@@ -36,10 +36,12 @@ PX4_LIMITS: dict[str, tuple[tuple[str, float], ...]] = {
     "climb_max_mps": (("MPC_Z_VEL_MAX_UP", 1.0),),
 }
 # the tilt the position control allows (the profile's ``max_tilt_deg``, not its [autopilot] table), in degrees:
-# ArduCopter's PSC_ANGLE_MAX where set (0 leaves it to the attitude controller's ATC_ANGLE_MAX, ANGLE_MAX in cdeg
-# on older firmware); PX4's MPC_TILTMAX_AIR, which its offboard position and velocity control clip to
+# ArduCopter's attitude controller's ATC_ANGLE_MAX (ANGLE_MAX in cdeg on older firmware), and its position
+# controller's PSC_ANGLE_MAX where that is set lower (0: unset); PX4's MPC_TILTMAX_AIR, which its offboard
+# position and velocity control clip to
 TILT_FIELD = "max_tilt_deg"
-ARDUPILOT_TILT = (("PSC_ANGLE_MAX", 1.0), ("ATC_ANGLE_MAX", 1.0), ("ANGLE_MAX", 0.01))
+ARDUPILOT_TILT = (("ATC_ANGLE_MAX", 1.0), ("ANGLE_MAX", 0.01))
+ARDUPILOT_POS_TILT = (("PSC_ANGLE_MAX", 1.0),)
 PX4_TILT = (("MPC_TILTMAX_AIR", 1.0),)
 # two limits this close are the same (a float32 parameter read back; a cm value scaled)
 SAME_REL = 1e-4
@@ -60,7 +62,11 @@ class LiveLimit:
 def ardupilot_limits(params: dict[str, float | int | None] | None) -> dict[str, LiveLimit]:
     """The GUIDED limits the parameters hold (field → ``LiveLimit``), in whichever names the firmware uses;
     a limit the vehicle does not report, or reports as 0 or less, is left out; the tilt as ``TILT_FIELD``."""
-    return _limits(params, {**ARDUPILOT_LIMITS, TILT_FIELD: ARDUPILOT_TILT})
+    out = _limits(params, {**ARDUPILOT_LIMITS, TILT_FIELD: ARDUPILOT_TILT})
+    pos = _limits(params, {TILT_FIELD: ARDUPILOT_POS_TILT}).get(TILT_FIELD)
+    if pos is not None and (TILT_FIELD not in out or pos.value < out[TILT_FIELD].value):
+        out[TILT_FIELD] = pos
+    return out
 
 
 def px4_limits(params: dict[str, float | int | None] | None) -> dict[str, LiveLimit]:

@@ -43,6 +43,7 @@ from flighttest.flying.ladder_executor import LADDER_TIMEOUT_S, LINK_GIVE_UP_S, 
 from flighttest.flying.link import GCS_SYSID, Link, VehicleLink
 from flighttest.flying.live_limits import (
     ARDUPILOT_LIMITS,
+    ARDUPILOT_POS_TILT,
     ARDUPILOT_TILT,
     LiveLimit,
     ardupilot_limits,
@@ -620,7 +621,8 @@ class MissionRunner:
         for name, kind in wanted.items():
             params[name] = all_params.get(name) if all_params else await link.get_param(name, kind)
         if rules.name == ARDUPILOT and all_params:  # older firmware's names of the GUIDED limits too
-            params.update({n: all_params[n] for names in (*ARDUPILOT_LIMITS.values(), ARDUPILOT_TILT)
+            params.update({n: all_params[n] for names in (*ARDUPILOT_LIMITS.values(), ARDUPILOT_TILT,
+                                                          ARDUPILOT_POS_TILT)
                            for n, _ in names if n in all_params})  # fmt: skip
             await self._plan_within(ardupilot_limits(params), ARDUPILOT)
         elif rules.name != ARDUPILOT:
