@@ -247,7 +247,7 @@ def test_the_plan_is_judged_with_the_disk_the_drag_tilts():
 
 def test_the_plans_tilt_is_judged_against_the_vehicles_limit():
     # issue 22: ATC_ANGLE_MAX / MPC_TILTMAX_AIR clip the tilt; a plan that leans further is flown late. A level
-    # descent, then one that accelerates at 3 m/s² horizontally (17° of tilt)
+    # descent, then one that accelerates at 3 m/s² horizontally (17.9° of tilt)
     level = pf.trajectory_stats(_vertical(3.0), REGION, 3.0)
     assert level.tilt_max_deg == pytest.approx(0.0, abs=1e-9)
     lean = leaning_descent()

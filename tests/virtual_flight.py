@@ -1,5 +1,6 @@
 """A vertical descent flown by the real mission runner against ``sitl_fakes.scripted`` in virtual time: the
-helper of ``tests/test_runner_virtual.py`` and ``tests/test_runner_safety.py``."""
+helper of ``tests/test_runner_virtual.py`` and ``tests/test_runner_safety.py`` (and a leaning descent for the
+preflight's tilt check)."""
 
 from __future__ import annotations
 
