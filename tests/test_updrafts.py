@@ -150,7 +150,7 @@ def test_gusts_whose_updraft_puts_a_hover_in_the_region_are_refused_before_anyth
         flighttest.prepare_flight("vertical", **args)
     p = subprocess.run([sys.executable, "-m", "flighttest", "fly", "vertical", "--connect", "udpin://0.0.0.0:14540",
                         "--vehicle", "x500", "--config", str(src), "--log-dir", str(logs), "--json"],
-                       capture_output=True, text=True)  # fmt: skip
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
     out = json.loads(p.stdout)
     assert p.returncode == 2 and out["outcome"] == "refused" and "gust_sd_mps" in out["error"]
     assert "Traceback" not in p.stderr and not logs.exists()
