@@ -17,8 +17,7 @@ from flighttest.flying.guard import predicted_blade_velocity_mps
 from flighttest.flying.link import TelemetryState
 from flighttest.flying.live_limits import param_value
 from flighttest.inputs import MAX_DURATION_S, MAX_HEIGHT_M
-from flighttest.model.aero import G_MPS2
-from flighttest.model.frames import GuardRegion, quat_to_rotmat
+from flighttest.model.frames import GuardRegion
 from flighttest.model.profiles import VehicleProfile
 from flighttest.model.trajectory import LIMIT_REL_TOL, TILT_TOL_DEG, Trajectory
 from flighttest.planner.autopilot_limits import AUTOPILOT_LIMIT_FRACTION
@@ -120,10 +119,6 @@ def trajectory_stats(
     an, ae, ad = (df[c].to_numpy(float) for c in ("an_mps2", "ae_mps2", "ad_mps2"))
     # stopping a sink vd at arrest_accel costs vd²/2a of height below where it starts
     stop = np.where(vd > 0, vd * vd / (2.0 * arrest_accel_mps2), 0.0)
-    if traj.has_attitude():
-        tilt = np.degrees(np.arccos(np.clip(quat_to_rotmat(traj.attitude_quat())[:, 2, 2], -1.0, 1.0)))
-    else:
-        tilt = np.degrees(np.arctan2(np.hypot(an, ae), G_MPS2 - ad))
     if traj.has_attitude() and drag_per_s <= 0:
         q = traj.attitude_quat()
         _, _, _, margin = region.check(vn, ve, vd, q[:, 0], q[:, 1], q[:, 2], q[:, 3])
@@ -152,7 +147,7 @@ def trajectory_stats(
         climb_max_mps=float(max(0.0, -vd.min())),
         accel_z_max_mps2=float(np.abs(ad).max()),
         accel_h_max_mps2=float(np.hypot(an, ae).max()),
-        tilt_max_deg=float(tilt.max()),
+        tilt_max_deg=float(traj.tilt_deg().max()),
     )
 
 

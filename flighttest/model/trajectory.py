@@ -136,6 +136,16 @@ class Trajectory:
         return self.df[list(QUAT_COLUMNS)].to_numpy()
 
     # -- validation -------------------------------------------------------------------------------
+
+    def tilt_deg(self) -> np.ndarray:
+        """The disk's tilt from level at each sample: the plan's own attitude, else where its specific force
+        points (thrust along −z_body)."""
+        if self.has_attitude():
+            return np.degrees(np.arccos(np.clip(quat_to_rotmat(self.attitude_quat())[:, 2, 2], -1.0, 1.0)))
+        spec = self.df[["an_mps2", "ae_mps2", "ad_mps2"]].to_numpy() - np.array([0.0, 0.0, G_MPS2])
+        up = -spec[:, 2] / np.maximum(np.linalg.norm(spec, axis=1), 1e-9)
+        return np.degrees(np.arccos(np.clip(up, -1.0, 1.0)))
+
     def validate(self, profile: VehicleProfile | None = None, where: str = "trajectory", coarse: bool = False) -> None:
         """Raise ``FlighttestError`` (one line) unless the data is well formed, physically consistent
         and, with a profile, flyable by that vehicle: speed, climb rate, tilt and collective thrust
@@ -308,14 +318,7 @@ class Trajectory:
                 f"{where}: the acceleration at t={df['t_s'].iloc[i]:.3f} s needs {required[i]:.3g} N of thrust, below "
                 f"the vehicle minimum ({min_thrust_n:.3g} N): it falls faster than the rotors allow"
             )
-        if self.has_attitude():
-            r = quat_to_rotmat(self.attitude_quat())
-            tilt = np.degrees(np.arccos(np.clip(r[:, 2, 2], -1.0, 1.0)))
-        else:
-            # Without attitude, the tilt is where the specific force points (thrust along −z_body).
-            up = -spec[:, 2] / np.maximum(np.linalg.norm(spec, axis=1), 1e-9)
-            tilt = np.degrees(np.arccos(np.clip(up, -1.0, 1.0)))
-        _limit(where, "tilt", tilt, profile.max_tilt_deg + TILT_TOL_DEG, "deg", df)
+        _limit(where, "tilt", self.tilt_deg(), profile.max_tilt_deg + TILT_TOL_DEG, "deg", df)
 
     # -- files ------------------------------------------------------------------------------------
     def save(self, path: Path | str) -> tuple[Path, Path]:
