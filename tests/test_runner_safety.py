@@ -369,19 +369,30 @@ def _climb_yaw_deg(f) -> np.ndarray:
     return np.array([float(r[yaw]) for r in rows[1:] if r[phase] == "climb"])
 
 
-def test_only_a_flight_that_chooses_a_plan_for_the_wind_swings_its_heading_in_the_climb(tmp_path):
+def test_a_descent_swings_its_heading_in_the_climb_and_a_probe_holds_it(tmp_path):
     from flighttest.flying.runner import LOOK_AROUND_DEG, LOOK_AROUND_RATE_DPS
 
-    # the vertical (no plans for the wind, as the probe): the heading held; the same flight given a plan for
-    # the wind to choose from: the climb's swing, out and back to the plan's heading before the hover
-    still = fly(tmp_path / "still")
-    assert still.outcome.outcome == "completed"
-    held = _climb_yaw_deg(still)
+    # a trajectory that returns to its start (a probe): the heading held, as identify's hover reference needs
+    t = np.arange(0.0, 4.0 + 1e-9, 0.02)
+    z = np.zeros_like(t)
+    d = 0.25 * (1.0 - np.cos(np.pi * t / 2.0))  # down 0.5 m and back up, at most 0.39 m/s
+    vd = 0.125 * np.pi * np.sin(np.pi * t / 2.0)
+    ad = 0.0625 * np.pi**2 * np.cos(np.pi * t / 2.0)
+    there_and_back = Trajectory.from_arrays(
+        {"kind": "vertical", "vehicle": "x500", "problem": {"height_m": 0.5}, "status": "closed_form"},
+        t_s=t, n_m=z, e_m=z, d_m=d, vn_mps=z, ve_mps=z, vd_mps=vd, an_mps2=z, ae_mps2=z, ad_mps2=ad, yaw_deg=z,
+    )  # fmt: skip
+    probe = fly(tmp_path / "probe", traj=there_and_back)
+    assert probe.outcome.outcome == "completed"
+    held = _climb_yaw_deg(probe)
     assert held.size > 50 and np.ptp(held) == 0.0
+    # a descent (the vertical, no plans for the wind: a trajectory file's climb is the same) and a flight that
+    # chooses among plans for the wind: the climb's swing, out and back to the plan's heading before the hover
     plan = load_mission_module("vertical").plan(X500, config(True))
-    swung = fly(tmp_path / "swung", request={"wind_plans": [plan]})
-    assert swung.outcome.outcome == "completed"
-    yaw = _climb_yaw_deg(swung)
-    # this short climb (to START_M) swings as far as the rate allows, and ends at the heading it left
-    assert 20.0 < np.ptp(yaw) <= LOOK_AROUND_DEG and yaw[-1] == pytest.approx(yaw[0], abs=1e-6)
-    assert np.abs(np.diff(yaw)).max() * 50.0 <= LOOK_AROUND_RATE_DPS * 1.01  # setpoints at 50 Hz
+    for name, request in (("file", {}), ("for_wind", {"wind_plans": [plan]})):
+        swung = fly(tmp_path / name, request=request)
+        assert swung.outcome.outcome == "completed"
+        yaw = _climb_yaw_deg(swung)
+        # this short climb (to START_M) swings as far as the rate allows, and ends at the heading it left
+        assert 20.0 < np.ptp(yaw) <= LOOK_AROUND_DEG and yaw[-1] == pytest.approx(yaw[0], abs=1e-6), name
+        assert np.abs(np.diff(yaw)).max() * 50.0 <= LOOK_AROUND_RATE_DPS * 1.01  # setpoints at 50 Hz
