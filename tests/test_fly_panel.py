@@ -83,6 +83,8 @@ def test_the_live_panel_shows_the_flight_and_the_prompt_is_answered(fake_vehicle
         "verdict": r"guard verdict\s+│ ok",
         "jitter": r"setpoint jitter\s+│ p99 \d+\.\d ms, [45]\d\.\d Hz",
         "link": r"link\s+│ up, posvel [45]\d Hz, last \d+ ms",
+        "wind": r"wind\s+│ 0\.\d ± 0\.\d\d m/s( from \d{3}°)? \(flighttest\)",  # still air, its own estimate
+        "updraft": r"updraft allowed\s+│ 0\.\d\d m/s \(gusts 1 σ 0\.\d\d m/s\)",
     }
     missing = [name for name, pattern in rows.items() if not re.search(pattern, screen)]
     assert not missing, f"panel rows not seen: {missing}\n{screen[-2500:]}"

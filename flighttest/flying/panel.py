@@ -1,5 +1,5 @@
-"""The live panel while flying (rich): phase, altitude, descent rate, w and u, guard margin, setpoint
-jitter, link health. Refreshed a few times a second from the runner's state; drawing never blocks
+"""The live panel while flying (rich): phase, altitude, descent rate, the wind the guard judges with, w and u,
+guard margin, setpoint jitter, link health. Refreshed a few times a second from the runner's state; drawing never blocks
 the guard (rich's Live redraws from its own thread)."""
 
 from __future__ import annotations
@@ -12,9 +12,21 @@ from collections.abc import Iterator
 from rich.live import Live
 from rich.table import Table
 
+from flighttest.flying.wind import WindEstimate
+
 
 def _f(v: float, fmt: str = ".2f", unit: str = "") -> str:
     return "—" if v is None or not math.isfinite(v) else f"{v:{fmt}}{unit}"
+
+
+def wind_rows(wind: WindEstimate) -> list[tuple[str, str]]:
+    """The wind as an operator reads it: its speed, the direction it blows from (as a windsock and ArduCopter's
+    ``SIM_WIND_DIR`` give it), its 1 σ and source; and the updraft the guard allows for the gusts."""
+    speed = math.hypot(*wind.ned_mps[:2])
+    from_deg = math.degrees(math.atan2(-wind.ned_mps[1], -wind.ned_mps[0])) % 360.0
+    where = f" from {from_deg:03.0f}°" if speed >= 0.05 else ""
+    return [("wind", f"{speed:.1f} ± {wind.sd_mps:.2f} m/s{where} ({wind.source})"),
+            ("updraft allowed", f"{wind.updraft_mps:.2f} m/s (gusts 1 σ {wind.gust_sd_mps:.2f} m/s)")]
 
 
 class LivePanel:
@@ -41,6 +53,8 @@ class LivePanel:
             rate = st.rate_hz("posvel", time.monotonic())
             up = "up" if st.connected else "[red]DOWN[/]"
             t.add_row("link", f"{up}, posvel {rate:.0f} Hz, last {_f(age * 1000, '.0f', ' ms')}")
+            for row in wind_rows(r.watch.wind()):
+                t.add_row(*row)
         if d is not None:
             colour = "green" if d.margin_mps >= 0 else "red"
             t.add_row("w / u", f"{_f(d.w_mps)} / {_f(d.u_mps)} m/s")
