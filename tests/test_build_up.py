@@ -28,6 +28,7 @@ from flighttest.campaign.build_up import (
     first_budget,
     halfway_budget,
     next_budget,
+    room_growth,
     stop_reason,
 )
 from flighttest.errors import FlighttestError
@@ -172,6 +173,30 @@ def test_tracking_room_widens_only_after_a_clean_flight_that_kept_its_reserve():
     upcoming = next_budget("guard_margin_mps", [f], RULES, caps)
     assert upcoming.margin_mps == RULES.floor_mps and stop_reason([f], upcoming, 5, RULES) is None
     assert "at the floor" in stop_reason([f], MarginBudget("guard_margin_mps", RULES.floor_mps, (), "", room), 5, RULES)
+
+
+def test_the_margin_used_is_scaled_to_the_tracking_room_the_next_flight_is_given():
+    # PX4 SITL's helix: flight 1 used 0.224 m/s at rate fraction 0.35 and thrust rate 8 m/s³; flight 2 was given
+    # 0.274 with both widened by 1.25 and the guard stopped it on its prediction. The used margin grows with the room
+    caps = {"rate_fraction": 1.0, "thrust_rate_max_mps3": 100.0}
+    room = (("rate_fraction", 0.35), ("thrust_rate_max_mps3", 8.0))
+    first = BuildUpFlight(1, MarginBudget("guard_margin_mps", 0.4, (), "", room),
+                          evidence(least=0.31, plan=0.534, estimate=0.0), "plans/h.csv")  # fmt: skip
+    b = next_budget("guard_margin_mps", [first], RULES, caps)
+    assert dict(b.expanded) == pytest.approx({"rate_fraction": 0.4375, "thrust_rate_max_mps3": 10.0})
+    tracking = next(t for t in b.terms if t.name == "tracking")
+    assert tracking.value_mps == pytest.approx(0.224 * 1.25)
+    assert "× 1.25 for its room widened since (rate_fraction, thrust_rate_max_mps3)" in tracking.source
+    assert b.margin_mps == pytest.approx(0.224 * 1.25 + RULES.reserve_mps)
+    # the room stays (the guard spoke on the last flight): the margin used is as measured
+    same = dict(room)
+    assert room_growth(same, same) == (1.0, [])
+    # the flight that used the most, not the last, is what is scaled: by how far the next room is from its own
+    second = BuildUpFlight(2, MarginBudget("guard_margin_mps", 0.35, (), "", tuple((k, v * 1.25) for k, v in room)),
+                           evidence(least=0.40, plan=0.45, estimate=0.0), "plans/h2.csv")  # fmt: skip
+    b2 = next_budget("guard_margin_mps", [first, second], RULES, caps)
+    t2 = next(t for t in b2.terms if t.name == "tracking")
+    assert t2.value_mps == pytest.approx(0.224 * 1.25**2) and t2.source.startswith("flight 1's plan")
 
 
 def test_the_helix_descent_widens_up_to_the_vehicles_own_limit():
