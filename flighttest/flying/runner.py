@@ -760,9 +760,9 @@ class MissionRunner:
 
         # the swing ends before the climb does: the heading has settled when the hover's baseline begins. Only
         # before a descent, which the hover judges in the wind (a trajectory file's too: ± 0.20 m/s without the
-        # swing on ArduCopter SITL, ± 0.08 with it); a probe, which returns to its start, holds its heading: the
-        # swing left the yaw ringing into the hover identify references (its onset's uncertainty 0.07 → 0.35-0.45
-        # m/s: bench/RESULTS.md, as above)
+        # swing on ArduCopter SITL, ± 0.10 with it: bench/RESULTS.md, "One change at a time, the climb's turn ...");
+        # a probe, which returns to its start, holds its heading: the swing left the yaw ringing into the hover
+        # identify references (its onset's uncertainty 0.07 → 0.35-0.45 m/s: bench/RESULTS.md, as above)
         n_look = max(int(LOOK_AROUND_SHARE * n_climb), 1)
         descends = bool(self.req.wind_plans) or dtime.goes_somewhere(self.traj.df[["n_m", "e_m", "d_m"]].iloc[-1])
         look_deg = look_around_deg(n_look / fl.rate_hz) if descends else 0.0
