@@ -189,8 +189,12 @@ def test_the_margin_used_is_scaled_to_the_tracking_room_the_next_flight_is_given
     assert "× 1.25 for its room widened since (rate_fraction, thrust_rate_max_mps3)" in tracking.source
     assert b.margin_mps == pytest.approx(0.224 * 1.25 + RULES.reserve_mps)
     # the room stays (the guard spoke on the last flight): the margin used is as measured
-    same = dict(room)
-    assert room_growth(same, same) == (1.0, [])
+    spoke = BuildUpFlight(1, MarginBudget("guard_margin_mps", 0.4, (), "", room),
+                          evidence(least=0.31, plan=0.534, estimate=0.0, flags=2), "plans/h.csv")  # fmt: skip
+    kept = next_budget("guard_margin_mps", [spoke], RULES, caps)
+    assert dict(kept.expanded) == dict(room) and room_growth(dict(room), dict(room)) == (1.0, [])
+    untouched = next(t for t in kept.terms if t.name == "tracking")
+    assert untouched.value_mps == pytest.approx(0.224) and "×" not in untouched.source
     # the flight that used the most, not the last, is what is scaled: by how far the next room is from its own
     second = BuildUpFlight(2, MarginBudget("guard_margin_mps", 0.35, (), "", tuple((k, v * 1.25) for k, v in room)),
                            evidence(least=0.40, plan=0.45, estimate=0.0), "plans/h2.csv")  # fmt: skip
