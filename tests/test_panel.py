@@ -50,3 +50,8 @@ def test_the_panel_shows_the_wind_the_guard_judges_mid_descent_and_fits_80_colum
     assert float(wind[1]) == pytest.approx(3.0, abs=0.3) and wind[3] in {"269", "270", "271"}
     assert float(wind[2]) < 0.3 and wind[4] == "flighttest"  # narrower than the prior it started from
     assert re.search(r"│ updraft allowed +│ \d\.\d\d m/s \(gusts 1 σ \d\.\d\d m/s\)", text), text
+    # the link's age and rate on the runner's clock, which stamped the samples (virtual here, the wall clock
+    # had them minutes old); the virtual vehicle sends its position at 50 Hz
+    link = re.search(r"│ link +│ up, posvel (\d+) Hz, last (\d+) ms", text)
+    assert link is not None, text
+    assert 40 <= int(link[1]) <= 60 and int(link[2]) <= 40

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import time
 from collections.abc import Iterator
 
 from rich.live import Live
@@ -49,8 +48,9 @@ class LivePanel:
             t.add_row("mode / armed", f"{st.flight_mode} / {st.armed}")
             t.add_row("altitude", _f(st.alt_m, ".2f", " m"))
             t.add_row("descent rate", _f(st.vd_mps, "+.2f", " m/s"))
-            age = time.monotonic() - st.t_posvel if st.t_posvel else math.nan
-            rate = st.rate_hz("posvel", time.monotonic())
+            now = r.now()  # the runner's clock, which stamped the samples (time.monotonic in flight)
+            age = now - st.t_posvel if st.t_posvel else math.nan
+            rate = st.rate_hz("posvel", now)
             up = "up" if st.connected else "[red]DOWN[/]"
             t.add_row("link", f"{up}, posvel {rate:.0f} Hz, last {_f(age * 1000, '.0f', ' ms')}")
             for row in wind_rows(r.watch.wind()):
